@@ -1,0 +1,1 @@
+"""Vectorised element kernels -> PETSc Vec/Mat."""

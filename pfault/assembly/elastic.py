@@ -1,0 +1,75 @@
+"""Assembly of the elastic operator and loads, vectorised over cells and batched into PETSc."""
+
+from __future__ import annotations
+
+import numpy as np
+from petsc4py import PETSc
+
+from ..mesh.serial import TET_FACES
+from ..physics import elasticity as el
+
+CHUNK = 65536
+
+
+class ElasticAssembler:
+    def __init__(self, mesh, dofmap, materials):
+        self.mesh = mesh
+        self.dofmap = dofmap
+        self.materials = materials
+        mat = mesh.cell_material
+        young = np.array([m.young_modulus for m in materials])[mat]
+        nu = np.array([m.poisson_ratio for m in materials])[mat]
+        self.lam, self.mu = el.lame(young, nu)
+        self.alpha = np.array([m.biot_coefficient for m in materials])[mat]
+        self.density = np.array([m.density for m in materials])[mat]
+        self.grad, self.vol = el.tet_geometry(mesh.coords[mesh.cells])
+        if len(self.vol) and self.vol.min() <= 0:
+            raise RuntimeError("inverted tetrahedron after distribution")
+        self.centroids = mesh.coords[mesh.cells].mean(axis=1)
+
+    # -- operator ----------------------------------------------------------------------------
+    def add_stiffness(self, mat):
+        """Add element stiffness matrices into ``mat`` (local numbering), in batches of CHUNK cells."""
+        dofs = self.dofmap.cell_dofs.astype(PETSc.IntType)
+        for s in range(0, len(dofs), CHUNK):
+            e = slice(s, s + CHUNK)
+            ke = el.stiffness(self.grad[e], self.vol[e], self.lam[e], self.mu[e])
+            mat.setValuesLocalRCV(dofs[e], dofs[e], ke.reshape(len(ke), 144), addv=PETSc.InsertMode.ADD_VALUES)
+
+    # -- loads (local arrays, to be added with localToGlobal) ---------------------------------
+    def scatter_cell_forces(self, fe, out):
+        """Add nodal forces fe (nc,4,3) into the local array ``out`` (bincount, no Python loop)."""
+        out += np.bincount(self.dofmap.cell_dofs.ravel(), weights=fe.reshape(-1), minlength=len(out))
+
+    def pore_pressure_load(self, dp, out):
+        self.scatter_cell_forces(el.pore_pressure_force(self.grad, self.vol, self.alpha * dp), out)
+
+    def gravity_load(self, g, out):
+        b = np.zeros((len(self.vol), 3))
+        b[:, 2] = -self.density * g
+        self.scatter_cell_forces(el.body_force(self.vol, b), out)
+
+    def initial_stress_load(self, sigma0, out):
+        """Right-hand side of a prestress: -int B^T sigma0."""
+        self.scatter_cell_forces(-el.stress_divergence_force(self.grad, self.vol, sigma0), out)
+
+    def traction_load(self, tractions, out):
+        """Constant tractions on tagged boundary faces; tractions[tag] = (tx, ty, tz)."""
+        tag = self.mesh.cell_face_tag
+        cell, lface = np.nonzero(tag >= 0)
+        if len(cell) == 0:
+            return
+        tri = self.mesh.cells[cell[:, None], TET_FACES[lface]]
+        area = np.linalg.norm(el.triangle_area_normal(self.mesh.coords[tri]), axis=1)
+        t = np.asarray(tractions, float)[tag[cell, lface]]
+        local = self.dofmap.cell_dofs.reshape(-1, 4, 3)[cell[:, None], TET_FACES[lface]]  # (nf, 3, 3)
+        f = np.repeat((area[:, None] * t / 3.0)[:, None, :], 3, axis=1)
+        out += np.bincount(local.ravel(), weights=f.ravel(), minlength=len(out))
+
+    # -- post-processing ----------------------------------------------------------------------
+    def cell_displacements(self, u_local):
+        return u_local[self.dofmap.cell_dofs].reshape(-1, 4, 3)
+
+    def effective_stress(self, u_local):
+        """Incremental effective stress C:eps(u) per cell (nc,3,3)."""
+        return el.stress(el.strain(self.grad, self.cell_displacements(u_local)), self.lam, self.mu)

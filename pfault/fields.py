@@ -1,0 +1,78 @@
+"""Named subfields on the DMPlex -> one PetscSection.
+
+Field 0 ``displacement`` lives on vertices, 3 dofs per side (split fault vertices carry two sides).
+Field 1 ``lagrange_multiplier_fault`` (only when the scene has faults) lives on the cells that own
+fault faces, 3 dofs (normal, two tangential tractions) per fault face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from petsc4py import PETSc
+
+DISPLACEMENT = "displacement"
+LAGRANGE = "lagrange_multiplier_fault"
+
+
+@dataclass
+class DofMap:
+    section: PETSc.Section
+    vert_offset: np.ndarray      # (nv,) local offset of each vertex's first dof
+    vert_sides: np.ndarray       # (nv,) 1 or 2 displacement sides
+    cell_offset: np.ndarray      # (nc,) local offset of each cell's multiplier dofs (-1: none)
+    cell_dofs: np.ndarray        # (nc, 12) local displacement dofs of each cell
+    n_local: int
+    fields: tuple
+
+    def vertex_dofs(self, side=0):
+        """(nv, 3) local dofs of the given side (side 1 falls back to side 0 where not split)."""
+        base = self.vert_offset + 3 * np.where(self.vert_sides > 1, side, 0)
+        return base[:, None] + np.arange(3)
+
+
+def build(mesh, vert_sides=None, cell_side=None, cell_multipliers=None):
+    """Create the section and set it on the DM.
+
+    vert_sides: (nv,) number of displacement sides per vertex (default 1)
+    cell_side: (nc, 4) which side (0/1) each cell uses at each of its vertices (default 0)
+    cell_multipliers: (nc,) number of fault faces whose multipliers a cell carries (default none)
+    """
+    dm = mesh.dm
+    nc, nv = len(mesh.cells), len(mesh.coords)
+    vert_sides = np.ones(nv, np.int64) if vert_sides is None else np.asarray(vert_sides, np.int64)
+    cell_side = np.zeros((nc, 4), np.int64) if cell_side is None else np.asarray(cell_side, np.int64)
+    with_lm = cell_multipliers is not None
+    cell_lm = np.zeros(nc, np.int64) if cell_multipliers is None else np.asarray(cell_multipliers, np.int64)
+    fields = (DISPLACEMENT, LAGRANGE) if with_lm else (DISPLACEMENT,)
+    sec = PETSc.Section().create(comm=dm.getComm())
+    sec.setNumFields(len(fields))
+    for f, name in enumerate(fields):
+        sec.setFieldName(f, name)
+        sec.setFieldComponents(f, 3)
+    p_start, p_end = dm.getChart()
+    sec.setChart(p_start, p_end)
+    # PetscSection has no array setter in petsc4py 3.18: one call per point that carries dofs
+    vdofs = 3 * vert_sides
+    for v, n in zip(range(mesh.v_start, mesh.v_start + nv), vdofs.tolist()):
+        sec.setDof(v, n)
+        sec.setFieldDof(v, 0, n)
+    if with_lm:
+        for c in np.nonzero(cell_lm)[0].tolist():
+            n = 3 * int(cell_lm[c])
+            sec.setDof(c, n)
+            sec.setFieldDof(c, 1, n)
+    sec.setUp()
+    dm.setSection(sec)
+    # offsets are laid out in chart order (cells first, then vertices)
+    counts = np.concatenate([3 * cell_lm, vdofs])
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    cell_offset = np.where(cell_lm > 0, offsets[:nc], -1)
+    vert_offset = offsets[nc:]
+    if nv:
+        assert sec.getOffset(mesh.v_start + nv - 1) == vert_offset[-1]
+    base = vert_offset[mesh.cells] + 3 * np.where(vert_sides[mesh.cells] > 1, cell_side, 0)
+    cell_dofs = (base[:, :, None] + np.arange(3)).reshape(nc, 12)
+    return DofMap(section=sec, vert_offset=vert_offset, vert_sides=vert_sides, cell_offset=cell_offset,
+                  cell_dofs=cell_dofs, n_local=int(counts.sum()), fields=fields)

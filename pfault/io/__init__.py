@@ -1,0 +1,1 @@
+"""Output: XDMF/HDF5 time series, summary.json, run metadata."""

@@ -1,0 +1,1 @@
+"""Meshes: built-in generators, gmsh input, fault splitting and DMPlex distribution."""

@@ -1,0 +1,77 @@
+"""Structured tetrahedral box: hexahedra split into six Kuhn tetrahedra, layered materials."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from .serial import SerialMesh, boundary_faces, orient_positive, TET_FACES
+
+# Kuhn (Freudenthal) subdivision: every tet follows a path 000 -> 111 along the cube edges
+_PERMS = [(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)]
+
+
+def _kuhn_corners():
+    tets = []
+    for p in _PERMS:
+        corner = np.zeros(3, int)
+        path = [corner.copy()]
+        for axis in p:
+            corner[axis] = 1
+            path.append(corner.copy())
+        tets.append([c[0] + 2 * c[1] + 4 * c[2] for c in path])
+    return np.array(tets)
+
+
+def layer_z_nodes(lz, nz, interfaces):
+    """z-coordinates of node planes from -lz to 0 with planes at every interface depth."""
+    depths = [0.0] + sorted(interfaces) + [lz]
+    if any(b <= a for a, b in zip(depths, depths[1:])):
+        raise InputError("-pfault_box_interfaces: depths must lie strictly between 0 and the box height "
+                         "and increase")
+    thick = np.diff(depths)
+    n = np.maximum(1, np.round(nz * thick / lz).astype(int))
+    zs = [np.array([0.0])]
+    for d0, d1, k in zip(depths[:-1], depths[1:], n):
+        zs.append(-np.linspace(d0, d1, k + 1)[1:])
+    return np.concatenate(zs)[::-1]  # increasing
+
+
+def box_mesh(size, cells, materials=("soil",), interfaces=(), xs=None, ys=None, zs=None):
+    lx, ly, lz = size
+    nx, ny, nz = (int(c) for c in cells)
+    if min(nx, ny, nz) < 1 or min(lx, ly, lz) <= 0:
+        raise InputError("-pfault_box_cells / -pfault_box_size: need positive sizes and at least one cell "
+                         "per direction")
+    if len(interfaces) != len(materials) - 1:
+        raise InputError(f"-pfault_box_interfaces: {len(materials)} materials need {len(materials) - 1} "
+                         f"interface depths, got {len(interfaces)}")
+    xs = np.linspace(0.0, lx, nx + 1) if xs is None else np.asarray(xs, float)
+    ys = np.linspace(0.0, ly, ny + 1) if ys is None else np.asarray(ys, float)
+    zs = layer_z_nodes(lz, nz, list(interfaces)) if zs is None else np.asarray(zs, float)
+    nx, ny, nz = len(xs) - 1, len(ys) - 1, len(zs) - 1
+    X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
+    points = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
+
+    def vid(i, j, k):
+        return (i * (ny + 1) + j) * (nz + 1) + k
+
+    i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
+    i, j, k = i.ravel(), j.ravel(), k.ravel()
+    corners = np.stack([vid(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1)) for c in range(8)], axis=1)
+    tets = corners[:, _kuhn_corners()].reshape(-1, 4)
+    tets = orient_positive(points, tets)
+    centroid_depth = -points[tets, 2].mean(axis=1)
+    bounds = np.asarray(sorted(interfaces), float)
+    cell_material = np.searchsorted(bounds, centroid_depth)
+    cell, lface = boundary_faces(tets, len(points))
+    tri = tets[cell[:, None], TET_FACES[lface]]
+    c = points[tri].mean(axis=1)
+    tol = 1e-9 * max(lx, ly, lz)
+    surfaces = {}
+    for name, mask in (("xmin", np.abs(c[:, 0] - xs[0]) < tol), ("xmax", np.abs(c[:, 0] - xs[-1]) < tol),
+                       ("ymin", np.abs(c[:, 1] - ys[0]) < tol), ("ymax", np.abs(c[:, 1] - ys[-1]) < tol),
+                       ("bottom", np.abs(c[:, 2] - zs[0]) < tol), ("top", np.abs(c[:, 2] - zs[-1]) < tol)):
+        surfaces[name] = tri[mask]
+    return SerialMesh(points=points, tets=tets, cell_material=cell_material.astype(np.int64),
+                      material_names=list(materials), surfaces=surfaces, source="box").check()

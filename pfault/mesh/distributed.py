@@ -1,0 +1,165 @@
+"""DMPlex from a SerialMesh on rank 0, distributed with PETSc's partitioner.
+
+Per-point data (cell connectivity in serial vertex ids, materials, boundary tags, constraints) travel
+to their new owners through the migration PetscSF returned by DMPlexDistribute; output fields come
+back to rank 0 in the serial numbering through the same SF.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .serial import TET_FACES
+
+
+@dataclass
+class LocalMesh:
+    dm: PETSc.DMPlex
+    coords: np.ndarray          # (nv, 3) local vertices (owned and ghost)
+    cells: np.ndarray           # (nc, 4) local vertex indices
+    cell_data: np.ndarray       # (nc, k) int payload columns (see CELL_COLUMNS)
+    vert_data: np.ndarray       # (nv, k) int payload columns (see VERT_COLUMNS)
+    cell_serial: np.ndarray     # (nc,) serial cell id
+    vert_serial: np.ndarray     # (nv,) serial vertex id
+    vert_owned: np.ndarray      # (nv,) bool
+    v_start: int
+    migration: PETSc.SF | None
+    n_global_vertices: int
+    n_global_cells: int
+
+    @property
+    def cell_material(self):
+        return self.cell_data[:, 4]
+
+    @property
+    def cell_face_tag(self):
+        return self.cell_data[:, 5:9]
+
+
+# payload layout: every point row has the same number of int columns
+CELL_COLUMNS = 9     # 4 serial vertex ids, material, 4 face tags (-1: none)
+VERT_COLUMNS = 2     # constraint mask (bit i: component i fixed), ground-surface flag
+PAYLOAD = max(CELL_COLUMNS, VERT_COLUMNS)
+
+
+def _int_type(width):
+    base = MPI.INT if PETSc.IntType().itemsize == 4 else MPI.INT64_T
+    t = base.Create_contiguous(width)
+    t.Commit()
+    return t
+
+
+def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=None):
+    """Create, distribute and localise the mesh. ``serial`` and the per-entity arrays live on rank 0."""
+    rank = comm.rank
+    itype = PETSc.IntType
+    if rank == 0:
+        cells = serial.tets.astype(itype)
+        coords = serial.points
+        nc, nv = len(cells), len(coords)
+    else:
+        cells = np.zeros((0, 4), itype)
+        coords = np.zeros((0, 3))
+        nc = nv = 0
+    dm = PETSc.DMPlex().createFromCellList(3, cells, coords, interpolate=False, comm=comm)
+    dm.setName("mesh")
+    n_global = comm.tompi4py().bcast((nc, nv) if rank == 0 else None, root=0)
+
+    # payload on the serial points: cells [0, nc), vertices [nc, nc + nv)
+    root = np.full((nc + nv, PAYLOAD), -1, dtype=itype)
+    if rank == 0:
+        root[:nc, 0:4] = serial.tets
+        root[:nc, 4] = serial.cell_material
+        if cell_face_tag is not None:
+            root[:nc, 5:9] = cell_face_tag
+        root[nc:, 0] = 0 if vert_constraint is None else vert_constraint
+        root[nc:, 1] = 0 if vert_ground is None else vert_ground
+    serial_id = np.concatenate([np.arange(nc), np.arange(nv)]).astype(itype)
+
+    part = dm.getPartitioner()
+    part.setFromOptions()
+    migration = dm.distribute() if comm.size > 1 else None
+    p_start, p_end = dm.getChart()
+    if migration is not None:
+        leaf = np.full((p_end - p_start, PAYLOAD), -1, dtype=itype)
+        unit = _int_type(PAYLOAD)
+        migration.bcastBegin(unit, root, leaf, MPI.REPLACE)
+        migration.bcastEnd(unit, root, leaf, MPI.REPLACE)
+        unit.Free()
+        leaf_id = np.full(p_end - p_start, -1, dtype=itype)
+        migration.bcastBegin(MPI.INT if itype().itemsize == 4 else MPI.INT64_T, serial_id, leaf_id, MPI.REPLACE)
+        migration.bcastEnd(MPI.INT if itype().itemsize == 4 else MPI.INT64_T, serial_id, leaf_id, MPI.REPLACE)
+    else:
+        leaf, leaf_id = root, serial_id
+    c_start, c_end = dm.getHeightStratum(0)
+    v_start, v_end = dm.getDepthStratum(0)
+    assert c_start == 0 and c_end == v_start, "expected cells before vertices in the chart"
+    cell_data = np.ascontiguousarray(leaf[c_start:c_end, :CELL_COLUMNS])
+    vert_data = np.ascontiguousarray(leaf[v_start:v_end, :VERT_COLUMNS])
+    cell_serial = leaf_id[c_start:c_end].astype(np.int64)
+    vert_serial = leaf_id[v_start:v_end].astype(np.int64)
+    # local connectivity from serial vertex ids
+    order = np.argsort(vert_serial)
+    pos = np.searchsorted(vert_serial[order], cell_data[:, 0:4])
+    local_cells = order[np.minimum(pos, len(order) - 1)] if len(order) else np.zeros((0, 4), np.int64)
+    if len(local_cells) and np.any(vert_serial[local_cells] != cell_data[:, 0:4]):
+        raise RuntimeError("a cell refers to a vertex that did not migrate with it")
+    coords = dm.getCoordinatesLocal().getArray().reshape(-1, 3).copy()
+    # ownership from the point SF: leaves of the point SF are ghosts
+    owned = np.ones(v_end - v_start, dtype=bool)
+    ilocal = dm.getPointSF().getGraph()[1] if comm.size > 1 else None
+    if ilocal is not None and len(ilocal):
+        ghosts = np.asarray(ilocal)
+        ghosts = ghosts[(ghosts >= v_start) & (ghosts < v_end)] - v_start
+        owned[ghosts] = False
+    return LocalMesh(dm=dm, coords=coords, cells=local_cells.astype(np.int64), cell_data=cell_data.astype(np.int64),
+                     vert_data=vert_data.astype(np.int64), cell_serial=cell_serial, vert_serial=vert_serial,
+                     vert_owned=owned, v_start=v_start, migration=migration,
+                     n_global_cells=n_global[0], n_global_vertices=n_global[1])
+
+
+def gather_vertex_values(mesh, values):
+    """Values per local vertex (nv, k) -> (n_global_vertices, k) in serial order on rank 0 (None elsewhere)."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    k = values.shape[1]
+    comm = mesh.dm.getComm()
+    if mesh.migration is None:
+        return values.copy()
+    p_start, p_end = mesh.dm.getChart()
+    leaf = np.zeros((p_end - p_start, k))
+    leaf[mesh.v_start:mesh.v_start + len(values)] = values
+    nroots = mesh.migration.getGraph()[0]
+    root = np.zeros((nroots, k))
+    unit = MPI.DOUBLE.Create_contiguous(k)
+    unit.Commit()
+    mesh.migration.reduceBegin(unit, leaf, root, MPI.REPLACE)
+    mesh.migration.reduceEnd(unit, leaf, root, MPI.REPLACE)
+    unit.Free()
+    if comm.rank == 0:
+        return root[mesh.n_global_cells:]
+    return None
+
+
+def gather_cell_values(mesh, values):
+    """Values per local cell (nc, k) -> (n_global_cells, k) in serial order on rank 0 (None elsewhere)."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    k = values.shape[1]
+    if mesh.migration is None:
+        return values.copy()
+    p_start, p_end = mesh.dm.getChart()
+    leaf = np.zeros((p_end - p_start, k))
+    leaf[:len(values)] = values
+    nroots = mesh.migration.getGraph()[0]
+    root = np.zeros((nroots, k))
+    unit = MPI.DOUBLE.Create_contiguous(k)
+    unit.Commit()
+    mesh.migration.reduceBegin(unit, leaf, root, MPI.REPLACE)
+    mesh.migration.reduceEnd(unit, leaf, root, MPI.REPLACE)
+    unit.Free()
+    if mesh.dm.getComm().rank == 0:
+        return root[:mesh.n_global_cells]
+    return None

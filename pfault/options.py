@@ -1,0 +1,238 @@
+"""Typed application options read from the PETSc options database under ``-pfault_``.
+
+Every option pfault reads is declared here with its type, default, unit and meaning, so that
+``python -m pfault -help`` can list them and a misspelled ``-pfault_`` option is an error. Options
+whose name holds a mesh name (``<material>``, ``<surface>``, ``<fault>``) are declared as patterns.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import difflib
+from dataclasses import dataclass, field
+
+from .errors import InputError
+from .units import parse_list, parse_quantity, parse_table
+
+
+@dataclass(frozen=True)
+class Spec:
+    name: str            # without the leading '-', may contain <material>, <surface>, <fault>
+    kind: str            # string | choice | real | int | bool | quantity | list | table | names
+    default: object
+    unit: str
+    help: str
+    choices: tuple = ()
+
+
+def _s(*args, **kw):
+    return Spec(*args, **kw)
+
+
+SPECS = [
+    # scene
+    _s("pfault_scene", "string", "", "", "scene name written to summary.json (default: options file stem)"),
+    _s("pfault_output_dir", "string", "runs/<scene>", "", "directory a run writes to"),
+    _s("pfault_output_every", "int", 1, "", "write fields every N time steps (the last step always)"),
+    _s("pfault_ground_surface", "string", "top", "", "physical surface that is the land surface (subsidence is "
+       "measured there; all vertices if the mesh has no such surface)"),
+    # mesh
+    _s("pfault_mesh_file", "string", "", "", "gmsh MSH 4.1 mesh; physical volumes are materials, physical "
+       "surfaces are boundaries and faults, addressed by name"),
+    _s("pfault_mesh_generator", "choice", "box", "", "built-in mesh when no -pfault_mesh_file is given",
+       choices=("box", "wuxi", "queretaro")),
+    _s("pfault_box_size", "list", "1000,1000,100", "m", "box lengths Lx,Ly,Lz; the box spans "
+       "[0,Lx]x[0,Ly]x[-Lz,0], land surface at z = 0"),
+    _s("pfault_box_cells", "list", "10,10,10", "", "hexahedra per direction nx,ny,nz (6 tetrahedra each)"),
+    _s("pfault_box_materials", "names", "soil", "", "material names from the top layer down"),
+    _s("pfault_box_interfaces", "list", "", "m", "depths below the surface of the interfaces between the "
+       "layers of -pfault_box_materials (one fewer than materials)"),
+    # materials
+    _s("pfault_material_<material>_young_modulus", "quantity", None, "Pa", "drained Young's modulus (required)"),
+    _s("pfault_material_<material>_poisson_ratio", "quantity", None, "", "drained Poisson ratio (required)"),
+    _s("pfault_material_<material>_biot_coefficient", "quantity", 1.0, "", "Biot coefficient alpha"),
+    _s("pfault_material_<material>_density", "quantity", 2000.0, "kg/m**3", "bulk (saturated) density, used "
+       "by the geostatic initial stress"),
+    _s("pfault_material_<material>_head_drawdown", "table", None, "m", "drawdown of hydraulic head as "
+       "time:value pairs, linear in between (dp = -rho_w g h); positive is a drop"),
+    _s("pfault_material_<material>_pressure_change", "table", None, "Pa", "pore-pressure change as "
+       "time:value pairs, linear in between; negative is a drawdown"),
+    # boundary conditions
+    _s("pfault_bc_<surface>_type", "choice", "free", "", "boundary condition on a physical surface",
+       choices=("free", "fixed", "roller", "traction")),
+    _s("pfault_bc_<surface>_traction", "list", "0,0,0", "Pa", "traction vector tx,ty,tz for type traction"),
+    # solver
+    _s("pfault_solver", "string", "", "", "solver options file: a name in config/solver (mumps, gamg, "
+       "fieldsplit) or a path; its options apply where not set by the scene or the command line"),
+    # loading / initial state
+    _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
+    _s("pfault_geostatic_k0", "quantity", -1.0, "", "ratio of horizontal to vertical effective stress "
+       "(default nu/(1-nu) of each material)"),
+    _s("pfault_gravity", "quantity", 9.80665, "m/s**2", "gravitational acceleration"),
+    _s("pfault_water_density", "quantity", 1000.0, "kg/m**3", "density of water (head to pressure)"),
+    _s("pfault_water_table", "quantity", 0.0, "m", "elevation of the initial water table (hydrostatic "
+       "initial pore pressure below it)"),
+    # time
+    _s("pfault_time_end", "quantity", 1.0, "s", "end time (units allowed, e.g. 10*year)"),
+    _s("pfault_time_steps", "int", 1, "", "number of equal time steps"),
+]
+
+_PLACEHOLDERS = ("<material>", "<surface>", "<fault>")
+
+
+def spec_for(name):
+    """The Spec of a concrete option name (patterns matched by prefix and suffix)."""
+    for s in SPECS:
+        if s.name == name:
+            return s
+    for s in SPECS:
+        for ph in _PLACEHOLDERS:
+            if ph in s.name:
+                head, tail = s.name.split(ph)
+                if name.startswith(head) and name.endswith(tail) and len(name) > len(head) + len(tail):
+                    return s
+    return None
+
+
+def help_text():
+    lines = ["pfault options (units in brackets; quantities accept units such as 10*year, -0.1*MPa):", ""]
+    width = max(len(s.name) for s in SPECS) + 2
+    for s in SPECS:
+        default = "" if s.default in (None, "") else f" (default {s.default})"
+        if s.default is None:
+            default = " (required)" if "required" in s.help else ""
+        unit = f" [{s.unit}]" if s.unit else ""
+        choices = f" {{{'|'.join(s.choices)}}}" if s.choices else ""
+        lines.append(f"  -{s.name:<{width}}{s.help}{choices}{unit}{default}")
+    lines.append("")
+    lines.append("Solver options are PETSc's (-snes_*, -ksp_*, -pc_*, -fieldsplit_displacement_*). "
+                 "Any option may be set in the scene file or on the command line; the command line wins.")
+    return "\n".join(lines)
+
+
+class OptionReader:
+    """Reads typed -pfault_ options and remembers which ones were asked for."""
+
+    def __init__(self, PETSc):
+        self.PETSc = PETSc
+        self.db = PETSc.Options()
+        self.queried: set[str] = set()
+        self.resolved: dict[str, object] = {}
+
+    def has(self, name):
+        self.queried.add(name)
+        return self.db.hasName(name)
+
+    def raw(self, name):
+        self.queried.add(name)
+        if not self.db.hasName(name):
+            return None
+        return self.db.getString(name)
+
+    def get(self, name, default=..., kind=None):
+        spec = spec_for(name)
+        if spec is None:
+            raise RuntimeError(f"option -{name} is not declared in pfault.options.SPECS")
+        kind = kind or spec.kind
+        if default is ...:
+            default = spec.default
+        text = self.raw(name)
+        if text is None:
+            value = self._convert(spec, kind, default, name) if isinstance(default, str) and kind not in (
+                "string", "choice") else default
+        else:
+            value = self._convert(spec, kind, text, name)
+        self.resolved[name] = value
+        return value
+
+    def _convert(self, spec, kind, text, name):
+        if kind in ("string",):
+            return str(text)
+        if kind == "choice":
+            if text not in spec.choices:
+                raise InputError(f"-{name}: '{text}' is not one of {', '.join(spec.choices)}")
+            return text
+        if kind == "bool":
+            t = str(text).strip().lower()
+            if t in ("", "1", "true", "yes", "on"):
+                return True
+            if t in ("0", "false", "no", "off"):
+                return False
+            raise InputError(f"-{name}: '{text}' is not true or false")
+        if kind == "int":
+            try:
+                return int(str(text))
+            except ValueError:
+                raise InputError(f"-{name}: '{text}' is not a whole number") from None
+        if kind in ("real", "quantity"):
+            return parse_quantity(text, name)
+        if kind == "list":
+            return parse_list(text, name) if str(text).strip() else []
+        if kind == "table":
+            return parse_table(text, name)
+        if kind == "names":
+            return [s.strip() for s in str(text).split(",") if s.strip()]
+        raise RuntimeError(kind)
+
+    def unknown_pfault_options(self):
+        """-pfault_ options in the database that nothing asked for (typos, or names not in the mesh)."""
+        names = [k for k in self.db.getAll() if k.startswith("pfault_")]
+        return sorted(n for n in names if n not in self.queried)
+
+    def check_pfault_options(self):
+        unknown = self.unknown_pfault_options()
+        if unknown:
+            raise InputError(_unknown_message(unknown[0], self.queried | {s.name for s in SPECS}))
+
+
+def _unknown_message(name, candidates):
+    close = difflib.get_close_matches(name, sorted(candidates), n=1, cutoff=0.6)
+    hint = f"; did you mean -{close[0]}?" if close else "; see python -m pfault -help"
+    spec = spec_for(name)
+    if spec is not None:
+        hint = (f"; the name in it does not match any physical volume/surface or fault of the mesh, "
+                f"or the option does not apply to this scene")
+    return f"unused option -{name}{hint}"
+
+
+# options PETSc reads only at finalize or that are not recorded as used but are legitimate
+_PETSC_LATE_OPTIONS = {"log_view", "options_left", "help", "options_file", "log_view_memory", "log_trace",
+                       "malloc_dump", "malloc_debug", "memory_view", "objects_dump", "info", "log_all",
+                       "on_error_abort", "on_error_attach_debugger", "start_in_debugger", "nox",
+                       "check_pointer_intensity", "error_output_stdout", "options_view"}
+
+
+def _petsc_library():
+    """The already loaded libpetsc shared object (Debian's or a pip build)."""
+    with open("/proc/self/maps") as fh:
+        for line in fh:
+            path = line.split()[-1]
+            if "libpetsc" in path and ".so" in path:
+                return ctypes.CDLL(path)
+    return None
+
+
+def unused_petsc_options(PETSc):
+    """Names of options in the PETSc database that no object has read (as -options_left reports)."""
+    lib = _petsc_library()
+    if lib is None:
+        return []
+    int_t = ctypes.c_int64 if PETSc.IntType().itemsize == 8 else ctypes.c_int32
+    n = int_t(0)
+    names = ctypes.POINTER(ctypes.c_char_p)()
+    values = ctypes.POINTER(ctypes.c_char_p)()
+    if lib.PetscOptionsLeftGet(None, ctypes.byref(n), ctypes.byref(names), ctypes.byref(values)) != 0:
+        return []
+    left = [names[i].decode() for i in range(n.value)]
+    lib.PetscOptionsLeftRestore(None, ctypes.byref(n), ctypes.byref(names), ctypes.byref(values))
+    return sorted(x for x in left if x not in _PETSC_LATE_OPTIONS and not x.startswith("pfault_"))
+
+
+def check_unused_petsc_options(PETSc, reader):
+    left = unused_petsc_options(PETSc)
+    if left:
+        candidates = set()
+        for k in reader.db.getAll():
+            candidates.add(k)
+        raise InputError(f"unused option -{left[0]}: no PETSc object in this run reads it (misspelled, or it "
+                         f"does not apply to the chosen solver); remove it or fix its name")

@@ -1,0 +1,40 @@
+"""Time histories and pore-pressure sources.
+
+A pore-pressure source gives dp (Pa, negative for drawdown) per cell at a time. Per-material
+drawdown tables are one source; a groundwater-flow model can supply another with the same method.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Table:
+    """Piecewise-linear function of time, constant beyond the ends."""
+    times: tuple
+    values: tuple
+
+    @classmethod
+    def from_pairs(cls, pairs, scale=1.0):
+        return cls(tuple(p[0] for p in pairs), tuple(scale * p[1] for p in pairs))
+
+    def __call__(self, t):
+        return float(np.interp(t, self.times, self.values))
+
+
+class MaterialDrawdown:
+    """dp(t) uniform within each material, from per-material tables (None: no change)."""
+
+    def __init__(self, tables):
+        self.tables = list(tables)  # index = material id
+
+    @property
+    def active(self):
+        return any(t is not None for t in self.tables)
+
+    def cell_values(self, t, cell_material, centroids=None):
+        per_material = np.array([0.0 if tab is None else tab(t) for tab in self.tables])
+        return per_material[cell_material]

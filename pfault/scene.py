@@ -1,0 +1,179 @@
+"""What a scene asks for: settings read from the options database, and the serial mesh it builds.
+
+Only what the scene calls for is built: no fault -> no multiplier field; no geostatic stress -> no
+gravity term; no drawdown table -> no pore-pressure load.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+from .physics.loading import MaterialDrawdown, Table
+
+
+@dataclass(frozen=True)
+class Material:
+    name: str
+    young_modulus: float
+    poisson_ratio: float
+    biot_coefficient: float
+    density: float
+
+
+@dataclass(frozen=True)
+class Boundary:
+    name: str
+    kind: str            # free | fixed | roller | traction
+    traction: tuple = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Settings:
+    scene: str
+    output_dir: str
+    output_every: int
+    ground_surface: str
+    mesh_file: str
+    mesh_generator: str
+    time_end: float
+    time_steps: int
+    geostatic: bool
+    k0: float
+    gravity: float
+    water_density: float
+    water_table: float
+
+
+def read_settings(reader, options_file=""):
+    stem = os.path.splitext(os.path.basename(options_file))[0] if options_file else "scene"
+    scene = reader.get("pfault_scene") or stem
+    out = reader.get("pfault_output_dir")
+    if out == "runs/<scene>":
+        out = os.path.join("runs", scene)
+    s = Settings(scene=scene, output_dir=out, output_every=max(1, reader.get("pfault_output_every")),
+                 ground_surface=reader.get("pfault_ground_surface"), mesh_file=reader.get("pfault_mesh_file"),
+                 mesh_generator=reader.get("pfault_mesh_generator"), time_end=reader.get("pfault_time_end"),
+                 time_steps=reader.get("pfault_time_steps"), geostatic=reader.get("pfault_geostatic"),
+                 k0=reader.get("pfault_geostatic_k0"), gravity=reader.get("pfault_gravity"),
+                 water_density=reader.get("pfault_water_density"), water_table=reader.get("pfault_water_table"))
+    if s.time_steps < 1:
+        raise InputError("-pfault_time_steps: need at least one step")
+    if s.time_end <= 0:
+        raise InputError("-pfault_time_end: must be positive (e.g. 10*year)")
+    return s
+
+
+def generator_options(reader, settings):
+    """Read the options of the built-in generator; returns a callable building the SerialMesh on rank 0."""
+    if settings.mesh_file:
+        path = settings.mesh_file
+        from .mesh.gmsh_io import read_msh
+        return lambda: read_msh(path)
+    if settings.mesh_generator == "box":
+        size = reader.get("pfault_box_size")
+        cells = reader.get("pfault_box_cells")
+        mats = reader.get("pfault_box_materials")
+        interfaces = reader.get("pfault_box_interfaces")
+        if len(size) != 3 or len(cells) != 3:
+            raise InputError("-pfault_box_size and -pfault_box_cells take three values each (x,y,z)")
+        from .mesh.box import box_mesh
+        return lambda: box_mesh(size, [int(c) for c in cells], mats, interfaces)
+    raise InputError(f"-pfault_mesh_generator {settings.mesh_generator}: this generator is not available yet; "
+                     "use box or give -pfault_mesh_file")
+
+
+def read_materials(reader, names):
+    mats = []
+    for name in names:
+        p = f"pfault_material_{name}_"
+        e = reader.get(p + "young_modulus")
+        nu = reader.get(p + "poisson_ratio")
+        if e is None:
+            raise InputError(f"missing -{p}young_modulus (Pa) for physical volume '{name}'")
+        if nu is None:
+            raise InputError(f"missing -{p}poisson_ratio for physical volume '{name}'")
+        if not e > 0:
+            raise InputError(f"-{p}young_modulus: must be positive, got {e}")
+        if not -1.0 < nu < 0.5:
+            raise InputError(f"-{p}poisson_ratio: must lie in (-1, 0.5), got {nu}")
+        alpha = reader.get(p + "biot_coefficient")
+        if not 0.0 <= alpha <= 1.0:
+            raise InputError(f"-{p}biot_coefficient: must lie in [0, 1], got {alpha}")
+        rho = reader.get(p + "density")
+        if rho <= 0:
+            raise InputError(f"-{p}density: must be positive, got {rho}")
+        mats.append(Material(name, e, nu, alpha, rho))
+    return mats
+
+
+def read_drawdown(reader, names, water_density, gravity):
+    tables = []
+    for name in names:
+        p = f"pfault_material_{name}_"
+        head = reader.get(p + "head_drawdown")
+        dp = reader.get(p + "pressure_change")
+        if head is not None and dp is not None:
+            raise InputError(f"-{p}head_drawdown and -{p}pressure_change are both set; give one")
+        if head is not None:
+            tables.append(Table.from_pairs(head, scale=-water_density * gravity))
+        elif dp is not None:
+            tables.append(Table.from_pairs(dp))
+        else:
+            tables.append(None)
+    return MaterialDrawdown(tables)
+
+
+def read_boundaries(reader, surface_names, exclude=()):
+    bcs = []
+    for name in surface_names:
+        if name in exclude:
+            continue
+        p = f"pfault_bc_{name}_"
+        kind = reader.get(p + "type")
+        traction = tuple(reader.get(p + "traction")) if kind == "traction" else (0.0, 0.0, 0.0)
+        if kind == "traction" and len(traction) != 3:
+            raise InputError(f"-{p}traction: give three components tx,ty,tz (Pa)")
+        bcs.append(Boundary(name, kind, traction))
+    return bcs
+
+
+def boundary_arrays(serial, bcs, ground_surface):
+    """Per-vertex constraint masks, per-cell face tags and ground flags on the serial mesh.
+
+    A roller fixes the displacement component normal to its surface, which must be a coordinate plane.
+    """
+    from .mesh.serial import locate_faces
+    nv, nc = len(serial.points), len(serial.tets)
+    mask = np.zeros(nv, dtype=np.int64)
+    face_tag = np.full((nc, 4), -1, dtype=np.int64)
+    for idx, bc in enumerate(bcs):
+        tri = serial.surfaces[bc.name]
+        if len(tri) == 0:
+            continue
+        if bc.kind == "fixed":
+            mask[np.unique(tri)] |= 7
+        elif bc.kind == "roller":
+            x = serial.points[tri]
+            n = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+            n /= np.linalg.norm(n, axis=1)[:, None]
+            axis = int(np.argmax(np.abs(n).sum(axis=0)))
+            if np.any(np.abs(np.abs(n[:, axis]) - 1.0) > 1e-6):
+                raise InputError(f"-pfault_bc_{bc.name}_type roller: surface '{bc.name}' is not a coordinate "
+                                 "plane; rollers need a surface normal to x, y or z")
+            mask[np.unique(tri)] |= 1 << axis
+        elif bc.kind == "traction":
+            t, cell, lface = locate_faces(serial.tets, nv, tri)
+            if len(t) != len(tri) or len(np.unique(t)) != len(tri):
+                raise InputError(f"-pfault_bc_{bc.name}_type traction: surface '{bc.name}' is not on the "
+                                 "outer boundary of the mesh")
+            face_tag[cell, lface] = idx
+    ground = np.zeros(nv, dtype=np.int64)
+    if ground_surface in serial.surfaces:
+        ground[np.unique(serial.surfaces[ground_surface])] = 1
+    else:
+        ground[:] = 1
+    return mask, face_tag, ground

@@ -1,0 +1,120 @@
+"""SNES/KSP construction with code defaults that never overwrite what the user set."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+from petsc4py import PETSc
+
+from ..errors import InputError
+
+
+def set_default(name, value):
+    """Set an option only if the user did not (command line and options files win)."""
+    opts = PETSc.Options()
+    if not opts.hasName(name):
+        opts.setValue(name, value)
+
+
+def read_options_file(path):
+    """(name, value) pairs of a PETSc options file (comments with #; nested -options_file followed)."""
+    import re
+    pairs = []
+    with open(path) as fh:
+        tokens = []
+        for line in fh:
+            tokens += line.split("#", 1)[0].split()
+    opt = re.compile(r"^-[A-Za-z_]")
+    i = 0
+    while i < len(tokens):
+        name = tokens[i]
+        if not opt.match(name):
+            raise InputError(f"{path}: expected an option name, got '{name}'")
+        value = None
+        if i + 1 < len(tokens) and not opt.match(tokens[i + 1]):
+            value = tokens[i + 1]
+            i += 1
+        i += 1
+        if name == "-options_file" and value:
+            pairs += read_options_file(value)
+        else:
+            pairs.append((name[1:], value))
+    return pairs
+
+
+def find_solver_file(name, scene_file=""):
+    if os.path.isfile(name):
+        return name
+    here = os.path.dirname(os.path.abspath(__file__))
+    candidates = [os.path.join(os.path.dirname(scene_file or "."), "solver", name + ".opts"),
+                  os.path.join("config", "solver", name + ".opts"),
+                  os.path.join(here, "..", "..", "config", "solver", name + ".opts")]
+    for c in candidates:
+        if os.path.isfile(c):
+            return os.path.normpath(c)
+    raise InputError(f"-pfault_solver {name}: no file {name}.opts in config/solver and no such path")
+
+
+def apply_solver_file(name, scene_file=""):
+    """Options of a solver file, each set only where the user has not set it."""
+    if not name:
+        return None
+    path = find_solver_file(name, scene_file)
+    opts = PETSc.Options()
+    user_chose_pc = opts.hasName("pc_type") or opts.hasName("ksp_type")
+    for key, value in read_options_file(path):
+        if user_chose_pc and (key.startswith("pc_") or key.startswith("mat_mumps") or key.startswith("mg_")):
+            continue  # a solver chosen explicitly does not inherit another solver's settings
+        if not opts.hasName(key):
+            opts.setValue(key, "" if value is None else value)
+    return path
+
+
+def apply_solver_defaults(linear=False):
+    """Code defaults, each only where the user is silent. A linear scene (no fault) needs one linear
+    solve per step: SNES type ksponly."""
+    opts = PETSc.Options()
+    if linear:
+        set_default("snes_type", "ksponly")
+    if not (opts.hasName("ksp_type") or opts.hasName("pc_type")):
+        set_default("ksp_type", "preonly")
+        set_default("pc_type", "lu")
+        set_default("pc_factor_mat_solver_type", "mumps")
+    set_default("snes_rtol", "1e-10")
+    set_default("snes_atol", "1e-12")
+    set_default("snes_max_it", "50")
+
+
+def rigid_body_modes(mesh, dofmap, dm):
+    """Orthonormal rigid-body modes of the displacement field (zero on multiplier dofs) as a NullSpace."""
+    x = mesh.coords
+    vecs = []
+    n_local = dofmap.n_local
+    for mode in range(6):
+        loc = np.zeros(n_local)
+        vals = np.zeros((len(x), 3))
+        if mode < 3:
+            vals[:, mode] = 1.0
+        else:
+            a, b = [(0, 1), (1, 2), (2, 0)][mode - 3]
+            vals[:, a] = -x[:, b]
+            vals[:, b] = x[:, a]
+        for side in (0, 1):
+            sel = dofmap.vert_sides > side
+            loc[dofmap.vertex_dofs(side)[sel]] = vals[sel]
+        lv = dm.getLocalVec()
+        lv.setArray(loc)
+        g = dm.createGlobalVec()
+        dm.localToGlobal(lv, g, addv=PETSc.InsertMode.INSERT_VALUES)
+        dm.restoreLocalVec(lv)
+        vecs.append(g)
+    # modified Gram-Schmidt
+    for i, v in enumerate(vecs):
+        for w in vecs[:i]:
+            v.axpy(-v.dot(w), w)
+        v.normalize()
+    ns = PETSc.NullSpace().create(vectors=vecs, comm=dm.getComm())
+    for v in vecs:
+        v.destroy()
+    return ns

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs what pfault needs on Debian 12, once: Debian's PETSc stack, OpenBLAS, and a venv
+# (system site packages) holding pfault (editable), gmsh, meshio and pytest. Seconds when ready.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+PKGS="python3-petsc4py-real python3-petsc4py python3-mpi4py python3-h5py-mpi petsc-dev python3-venv libopenblas0-pthread"
+missing=""
+for p in $PKGS; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then missing="$missing $p"; fi
+done
+if [ -n "$missing" ]; then
+  echo "setup: installing Debian packages:$missing"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq $missing >/dev/null
+fi
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv (with system site packages: Debian's petsc4py, mpi4py, numpy, h5py)"
+  /usr/bin/python3 -m venv --system-site-packages .venv
+fi
+if ! .venv/bin/python -c "import gmsh, meshio, pytest" >/dev/null 2>&1; then
+  echo "setup: installing gmsh, meshio, pytest into .venv"
+  # numpy stays Debian's (petsc4py is compiled against it)
+  .venv/bin/pip install -q --disable-pip-version-check gmsh meshio pytest "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
+fi
+if ! .venv/bin/python -c "import pfault, sys; sys.exit(0 if pfault.__file__.startswith('$PWD') else 1)" >/dev/null 2>&1; then
+  .venv/bin/pip install -q --disable-pip-version-check --no-build-isolation --no-deps -e .
+fi

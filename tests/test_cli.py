@@ -1,0 +1,69 @@
+"""Command line: help, bad input (one clear line, every rank, non-zero exit, nothing written)."""
+
+import os
+
+import pytest
+
+from conftest import run, run_scene
+
+
+def test_help_lists_every_option():
+    proc = run(["-m", "pfault", "-help"])
+    from pfault.options import SPECS
+    for spec in SPECS:
+        assert f"-{spec.name}" in proc.stdout
+    assert "[Pa]" in proc.stdout and "default" in proc.stdout
+
+
+def test_no_scene_is_usage_error():
+    proc = run(["-m", "pfault"], check=False)
+    assert proc.returncode == 2 and "usage" in proc.stderr
+
+
+def test_missing_scene_file():
+    proc = run(["-m", "pfault", "config/no_such_scene.opts"], check=False)
+    assert proc.returncode == 2
+    assert "config/no_such_scene.opts" in proc.stderr
+
+
+BAD = [
+    (["-pfault_bc_top_typ", "free"], "-pfault_bc_top_typ; did you mean -pfault_bc_top_type?"),
+    (["-ksp_rtoll", "1e-3"], "unused option -ksp_rtoll"),
+    (["-pfault_material_sand_young_modulus", "1e6"], "unused option -pfault_material_sand_young_modulus"),
+    (["-pfault_material_soil_poisson_ratio", "0.7"], "-pfault_material_soil_poisson_ratio: must lie in (-1, 0.5)"),
+    (["-pfault_time_end", "10*years"], "unknown unit 'years'"),
+    (["-pfault_bc_top_type", "clamped"], "-pfault_bc_top_type: 'clamped' is not one of"),
+    (["-pfault_mesh_file", "nowhere.msh"], "-pfault_mesh_file: no such file 'nowhere.msh'"),
+    (["-pfault_solver", "superfast"], "-pfault_solver superfast"),
+]
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("extra,message", BAD)
+def test_bad_input(tmp_path, ranks, extra, message):
+    out = tmp_path / "out"
+    proc, summary = run_scene("config/oedometer.opts", out, ranks=ranks, extra=extra, check=False)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("pfault: error:")]
+    assert len(lines) == 1, proc.stderr       # printed once, not once per rank
+    assert message in lines[0]
+    assert "Traceback" not in proc.stderr
+    assert not os.path.exists(out)            # nothing written
+
+
+def test_missing_material_property(tmp_path):
+    scene = tmp_path / "s.opts"
+    scene.write_text("-pfault_box_cells 1,1,1\n-pfault_box_materials sand\n")
+    proc, _ = run_scene(str(scene), tmp_path / "out", check=False)
+    assert proc.returncode == 1
+    assert "missing -pfault_material_sand_young_modulus (Pa)" in proc.stderr
+
+
+def test_command_line_overrides_scene_file(tmp_path):
+    _, summary = run_scene("config/oedometer.opts", tmp_path, extra=["-pfault_time_steps", "2",
+                                                                     "-pfault_box_cells", "1,1,4"])
+    assert len(summary["steps"]) == 2
+    assert summary["mesh"]["cells"] == 6 * 4
+    text = (tmp_path / "options.txt").read_text()
+    assert "-pfault_time_steps 2" in text
+    assert (tmp_path / "versions.json").exists()
