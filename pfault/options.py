@@ -47,6 +47,27 @@ SPECS = [
     _s("pfault_box_materials", "names", "soil", "", "material names from the top layer down"),
     _s("pfault_box_interfaces", "list", "", "m", "depths below the surface of the interfaces between the "
        "layers of -pfault_box_materials (one fewer than materials)"),
+    _s("pfault_mesh_size_factor", "real", 1.0, "", "element size multiplier of the built-in case-study meshes "
+       "(2: ~8x fewer cells; ~4x at wuxi, whose thin layers bound the element height)"),
+    _s("pfault_wuxi_ridge_x", "quantity", 1000.0, "m", "wuxi: x of the bedrock ridge crest and of the vertical "
+       "fissure plane (domain 2 km x 5 km x 250 m)"),
+    _s("pfault_wuxi_crest_depth", "quantity", 5.0, "m", "wuxi: depth of the bedrock crest below the land "
+       "surface; the fissure spans the surface down to it"),
+    _s("pfault_wuxi_bedrock_depth", "quantity", 100.0, "m", "wuxi: depth of the bedrock top away from the "
+       "ridge"),
+    _s("pfault_wuxi_ridge_half_width", "quantity", 500.0, "m", "wuxi: horizontal distance from the crest to "
+       "the foot of each (planar) ridge flank"),
+    _s("pfault_wuxi_interfaces", "list", "20,50,80", "m", "wuxi: depths of the interfaces between the "
+       "Quaternary layers, alternately clay and sand from the top (clay 0-20, sand 20-50, clay 50-80, "
+       "sand 80-bedrock)"),
+    _s("pfault_queretaro_fault_x", "quantity", 10000.0, "m", "queretaro: x of the vertical fault; rock for "
+       "x below it (domain 30 km x 30 km x 50 m)"),
+    _s("pfault_queretaro_clay_thickness", "quantity", 20.0, "m", "queretaro: clay aquitard thickness over "
+       "the sand aquifer (down to 50 m)"),
+    _s("pfault_queretaro_wells", "list", "12000,12000,12000,15000,12000,18000", "m", "queretaro: well "
+       "positions x1,y1,x2,y2,... in the aquifer; the mesh is refined around them"),
+    _s("pfault_box_fault_planes", "names", "", "m", "internal surfaces of the box as name:axis:value, "
+       "optionally limited to a rectangle name:axis:value:lo1:hi1:lo2:hi2 of the other two coordinates"),
     # materials
     _s("pfault_material_<material>_young_modulus", "quantity", None, "Pa", "drained Young's modulus (required)"),
     _s("pfault_material_<material>_poisson_ratio", "quantity", None, "", "drained Poisson ratio (required)"),
@@ -57,10 +78,43 @@ SPECS = [
        "time:value pairs, linear in between (dp = -rho_w g h); positive is a drop"),
     _s("pfault_material_<material>_pressure_change", "table", None, "Pa", "pore-pressure change as "
        "time:value pairs, linear in between; negative is a drawdown"),
+    _s("pfault_material_<material>_hydraulic_conductivity", "quantity", None, "m/s", "isotropic hydraulic "
+       "conductivity K (required with -pfault_flow)"),
+    _s("pfault_material_<material>_specific_storage", "quantity", None, "1/m", "specific storage S_s (default: "
+       "rho_w g (alpha c_M + n beta_w), c_M oedometric compressibility, n = e/(1+e), beta_w = 4.4e-10 1/Pa)"),
+    _s("pfault_material_<material>_void_ratio", "quantity", 0.7, "", "void ratio e (porosity e/(1+e) in the "
+       "specific storage)"),
     # boundary conditions
     _s("pfault_bc_<surface>_type", "choice", "free", "", "boundary condition on a physical surface",
-       choices=("free", "fixed", "roller", "traction")),
-    _s("pfault_bc_<surface>_traction", "list", "0,0,0", "Pa", "traction vector tx,ty,tz for type traction"),
+       choices=("free", "fixed", "roller", "traction", "displacement")),
+    _s("pfault_bc_<surface>_traction", "list", "0,0,0", "Pa", "traction vector tx,ty,tz (types traction and "
+       "displacement; on the latter it acts on the components left free)"),
+    _s("pfault_bc_<surface>_displacement", "list", "0,0,0", "m", "prescribed displacement ux,uy,uz for type "
+       "displacement"),
+    _s("pfault_bc_<surface>_components", "names", "x,y,z", "", "components prescribed by type displacement"),
+    _s("pfault_bc_<surface>_history", "table", None, "", "time:scale table multiplying the surface's "
+       "traction and displacement (default: constant 1)"),
+    # faults
+    _s("pfault_faults", "names", "", "", "physical surfaces that are faults (split, with contact and friction)"),
+    _s("pfault_fault_<fault>_cohesion", "quantity", 0.0, "Pa", "cohesion c of the Mohr-Coulomb criterion"),
+    _s("pfault_fault_<fault>_friction_angle", "quantity", 30.0, "degree", "friction angle phi"),
+    _s("pfault_fault_<fault>_method", "choice", "lagrange", "", "contact enforcement",
+       choices=("lagrange", "penalty")),
+    _s("pfault_fault_<fault>_stabilization", "bool", True, "", "traction-jump stabilisation of the P1-P0 "
+       "multipliers (scaling from the local stiffness; no coefficient)"),
+    _s("pfault_fault_<fault>_penalty_normal", "quantity", 0.0, "Pa/m", "normal penalty stiffness (0: E/h of "
+       "the adjacent cell)"),
+    _s("pfault_fault_<fault>_penalty_tangential", "quantity", 0.0, "Pa/m", "tangential penalty stiffness "
+       "(0: E/h of the adjacent cell)"),
+    _s("pfault_contact_max_active_set_its", "int", 30, "", "active-set (stick/slip/open) updates per step "
+       "before the step is reported as not settled"),
+    _s("pfault_contact_traction_tol", "quantity", -1.0, "Pa", "tensile normal traction that opens a closed "
+       "face (default 1e-8 of the largest Young's modulus)"),
+    _s("pfault_contact_opening_tol", "quantity", -1.0, "m", "interpenetration that closes an open face "
+       "(default 1e-12 of the mesh size)"),
+    _s("pfault_contact_slip_tol", "quantity", 1e-3, "", "relative hysteresis of the stick/slip switch"),
+    _s("pfault_contact_active_set_tol", "quantity", 0.0, "", "fraction of the fault area allowed to change "
+       "state in the last active-set update of a settled step"),
     # solver
     _s("pfault_solver", "string", "", "", "solver options file: a name in config/solver (mumps, gamg, "
        "fieldsplit) or a path; its options apply where not set by the scene or the command line"),
@@ -72,6 +126,16 @@ SPECS = [
     _s("pfault_water_density", "quantity", 1000.0, "kg/m**3", "density of water (head to pressure)"),
     _s("pfault_water_table", "quantity", 0.0, "m", "elevation of the initial water table (hydrostatic "
        "initial pore pressure below it)"),
+    # groundwater flow
+    _s("pfault_flow", "bool", False, "", "solve transient groundwater flow for the head change and load the "
+       "skeleton with dp = rho_w g h (instead of per-material tables)"),
+    _s("pfault_flow_wells", "list", "", "m", "well positions x1,y1,x2,y2,..."),
+    _s("pfault_flow_well_screen", "list", "", "m", "z_top,z_bottom of the screen of every well"),
+    _s("pfault_flow_well_rate", "table", None, "m**3/s", "pumping rate per well as time:rate pairs, linear in "
+       "between (units allowed, e.g. 0:0,1*year:300*L/s); positive is extraction"),
+    _s("pfault_flow_fixed_head_surfaces", "names", "", "", "physical surfaces held at h = 0 (others are "
+       "no-flow)"),
+    _s("pfault_flow_substeps", "int", 1, "", "backward-Euler flow steps per mechanical time step"),
     # time
     _s("pfault_time_end", "quantity", 1.0, "s", "end time (units allowed, e.g. 10*year)"),
     _s("pfault_time_steps", "int", 1, "", "number of equal time steps"),

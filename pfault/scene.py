@@ -27,8 +27,14 @@ class Material:
 @dataclass(frozen=True)
 class Boundary:
     name: str
-    kind: str            # free | fixed | roller | traction
+    kind: str            # free | fixed | roller | traction | displacement
     traction: tuple = (0.0, 0.0, 0.0)
+    displacement: tuple = (0.0, 0.0, 0.0)
+    components: int = 0  # bit mask of prescribed components (type displacement)
+    history: object = None  # Table of a scale factor, or None for constant 1
+
+    def scale(self, t):
+        return 1.0 if self.history is None else self.history(t)
 
 
 @dataclass(frozen=True)
@@ -80,10 +86,22 @@ def generator_options(reader, settings):
         interfaces = reader.get("pfault_box_interfaces")
         if len(size) != 3 or len(cells) != 3:
             raise InputError("-pfault_box_size and -pfault_box_cells take three values each (x,y,z)")
-        from .mesh.box import box_mesh
-        return lambda: box_mesh(size, [int(c) for c in cells], mats, interfaces)
+        from .mesh.box import box_mesh, parse_planes
+        planes = parse_planes(reader.get("pfault_box_fault_planes"))
+        return lambda: box_mesh(size, [int(c) for c in cells], mats, interfaces, planes=planes)
+    if settings.mesh_generator == "wuxi":
+        factor = reader.get("pfault_mesh_size_factor")
+        params = {key: reader.get(f"pfault_wuxi_{key}") for key in
+                  ("ridge_x", "crest_depth", "bedrock_depth", "ridge_half_width", "interfaces")}
+        from .mesh.geometry import wuxi_mesh
+        return lambda: wuxi_mesh(factor, **params)
+    if settings.mesh_generator == "queretaro":
+        factor = reader.get("pfault_mesh_size_factor")
+        params = {key: reader.get(f"pfault_queretaro_{key}") for key in ("fault_x", "clay_thickness", "wells")}
+        from .mesh.geometry import queretaro_mesh
+        return lambda: queretaro_mesh(factor, **params)
     raise InputError(f"-pfault_mesh_generator {settings.mesh_generator}: this generator is not available yet; "
-                     "use box or give -pfault_mesh_file")
+                     "use box, wuxi or queretaro, or give -pfault_mesh_file")
 
 
 def read_materials(reader, names):
@@ -134,10 +152,23 @@ def read_boundaries(reader, surface_names, exclude=()):
             continue
         p = f"pfault_bc_{name}_"
         kind = reader.get(p + "type")
-        traction = tuple(reader.get(p + "traction")) if kind == "traction" else (0.0, 0.0, 0.0)
-        if kind == "traction" and len(traction) != 3:
+        traction = tuple(reader.get(p + "traction")) if kind in ("traction", "displacement") else (0.0, 0.0, 0.0)
+        if len(traction) != 3:
             raise InputError(f"-{p}traction: give three components tx,ty,tz (Pa)")
-        bcs.append(Boundary(name, kind, traction))
+        disp, comps = (0.0, 0.0, 0.0), 0
+        if kind == "displacement":
+            disp = tuple(reader.get(p + "displacement"))
+            if len(disp) != 3:
+                raise InputError(f"-{p}displacement: give three components ux,uy,uz (m)")
+            for c in reader.get(p + "components"):
+                if c not in ("x", "y", "z"):
+                    raise InputError(f"-{p}components: '{c}' is not one of x, y, z")
+                comps |= 1 << "xyz".index(c)
+        history = None
+        if kind in ("traction", "displacement"):
+            pairs = reader.get(p + "history")
+            history = Table.from_pairs(pairs) if pairs is not None else None
+        bcs.append(Boundary(name, kind, traction, disp, comps, history))
     return bcs
 
 
@@ -150,6 +181,7 @@ def boundary_arrays(serial, bcs, ground_surface):
     nv, nc = len(serial.points), len(serial.tets)
     mask = np.zeros(nv, dtype=np.int64)
     face_tag = np.full((nc, 4), -1, dtype=np.int64)
+    disp_surface = np.full(nv, -1, dtype=np.int64)
     for idx, bc in enumerate(bcs):
         tri = serial.surfaces[bc.name]
         if len(tri) == 0:
@@ -165,10 +197,14 @@ def boundary_arrays(serial, bcs, ground_surface):
                 raise InputError(f"-pfault_bc_{bc.name}_type roller: surface '{bc.name}' is not a coordinate "
                                  "plane; rollers need a surface normal to x, y or z")
             mask[np.unique(tri)] |= 1 << axis
-        elif bc.kind == "traction":
+        if bc.kind == "displacement":
+            v = np.unique(tri)
+            mask[v] |= bc.components
+            disp_surface[v] = idx
+        if bc.kind in ("traction", "displacement") and any(bc.traction):
             t, cell, lface = locate_faces(serial.tets, nv, tri)
             if len(t) != len(tri) or len(np.unique(t)) != len(tri):
-                raise InputError(f"-pfault_bc_{bc.name}_type traction: surface '{bc.name}' is not on the "
+                raise InputError(f"-pfault_bc_{bc.name}_type {bc.kind}: surface '{bc.name}' is not on the "
                                  "outer boundary of the mesh")
             face_tag[cell, lface] = idx
     ground = np.zeros(nv, dtype=np.int64)
@@ -176,4 +212,39 @@ def boundary_arrays(serial, bcs, ground_surface):
         ground[np.unique(serial.surfaces[ground_surface])] = 1
     else:
         ground[:] = 1
-    return mask, face_tag, ground
+    return mask, face_tag, np.column_stack([ground, disp_surface])
+
+
+def read_faults(reader, surface_names):
+    from .solver.fault import FaultSettings
+    names = reader.get("pfault_faults")
+    faults = []
+    for name in names:
+        if name not in surface_names:
+            raise InputError(f"-pfault_faults: '{name}' is not a physical surface of the mesh "
+                             f"(surfaces: {', '.join(surface_names)})")
+        p = f"pfault_fault_{name}_"
+        phi = reader.get(p + "friction_angle")
+        if not 0.0 <= phi < 90.0:
+            raise InputError(f"-{p}friction_angle: must lie in [0, 90) degrees, got {phi}")
+        c = reader.get(p + "cohesion")
+        if c < 0:
+            raise InputError(f"-{p}cohesion: must not be negative, got {c}")
+        method = reader.get(p + "method")
+        faults.append(FaultSettings(name=name, cohesion=c, friction_angle=phi, method=method,
+                                    stabilization=reader.get(p + "stabilization"),
+                                    penalty_normal=reader.get(p + "penalty_normal") if method == "penalty" else 0.0,
+                                    penalty_tangential=reader.get(p + "penalty_tangential")
+                                    if method == "penalty" else 0.0))
+    return faults
+
+
+def read_contact_options(reader, materials, serial_extent):
+    emax = max(m.young_modulus for m in materials)
+    ttol = reader.get("pfault_contact_traction_tol")
+    otol = reader.get("pfault_contact_opening_tol")
+    return {"max_active_set_its": reader.get("pfault_contact_max_active_set_its"),
+            "traction_tol": ttol if ttol >= 0 else 1e-8 * emax,
+            "opening_tol": otol if otol >= 0 else 1e-12 * serial_extent,
+            "slip_tol": reader.get("pfault_contact_slip_tol"),
+            "active_set_tol": reader.get("pfault_contact_active_set_tol")}

@@ -20,6 +20,15 @@ class NotConverged(Exception):
     pass
 
 
+def _fmt_time(t):
+    year = 365.25 * 86400.0
+    if t >= 0.01 * year:
+        return f"{t / year:8.4g} yr"
+    if t >= 86400.0:
+        return f"{t / 86400.0:8.4g} d"
+    return f"{t:8.4g} s"
+
+
 def _print(*args):
     PETSc.Sys.Print(" ".join(str(a) for a in args))
 
@@ -48,24 +57,57 @@ class Simulation:
         self.material_names, self.surface_names = names
         self.materials = scn.read_materials(reader, self.material_names)
         self.drawdown = scn.read_drawdown(reader, self.material_names, s.water_density, s.gravity)
-        self.boundaries = scn.read_boundaries(reader, self.surface_names)
+        self.fault_settings = scn.read_faults(reader, self.surface_names)
+        fault_names = [f.name for f in self.fault_settings]
+        self.boundaries = scn.read_boundaries(reader, self.surface_names, exclude=fault_names)
+        extent = comm.tompi4py().bcast(float(np.ptp(serial.points, axis=0).max()) if comm.rank == 0 else None)
+        self.contact_opts = scn.read_contact_options(reader, self.materials, extent)
         reader.check_pfault_options()
 
         def arrays():
-            return scn.boundary_arrays(serial, self.boundaries, s.ground_surface)
+            out = scn.boundary_arrays(serial, self.boundaries, s.ground_surface)
+            split = pairs = None
+            if fault_names:
+                from .mesh.fault import split_faults
+                from .solver.fault import stabilization_pairs
+                split = split_faults(serial, fault_names)
+                pairs = stabilization_pairs(serial, split, self.materials)
+            return out, split, pairs
         arr = run_on_root(comm, arrays)
-        mask, face_tag, ground = arr if arr is not None else (None, None, None)
+        (mask, face_tag, ground), split, pairs = arr if arr is not None else ((None, None, None), None, None)
         self.serial = serial
-        self.mesh = distributed.build(comm, serial, cell_face_tag=face_tag, vert_constraint=mask, vert_ground=ground)
+        self.split = split
+        self.mesh = distributed.build(comm, serial, cell_face_tag=face_tag, vert_constraint=mask, vert_ground=ground,
+                                      split=split)
+        if fault_names:
+            mpi = comm.tompi4py()
+            self.fault_id = mpi.bcast(split.fault_id if comm.rank == 0 else None)
+            self.pairs, self.pair_S = mpi.bcast(pairs if comm.rank == 0 else None)
         stage.pop()
         self.wall["mesh"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Setup")
         stage.push()
-        self.dofmap = fields.build(self.mesh)
+        if self.fault_settings:
+            lagrange = any(f.method == "lagrange" for f in self.fault_settings)
+            lm_faces = None
+            if lagrange:
+                fid = self.mesh.cell_fault_face
+                is_lag = np.array([f.method == "lagrange" for f in self.fault_settings])
+                lm_faces = ((fid >= 0) & is_lag[np.where(fid >= 0, self.fault_id[np.maximum(fid, 0)], 0)]).sum(axis=1)
+            self.dofmap = fields.build(self.mesh, vert_sides=self.mesh.vert_sides, cell_side=self.mesh.cell_side,
+                                       cell_multipliers=lm_faces)
+        else:
+            self.dofmap = fields.build(self.mesh)
         self.asm = ElasticAssembler(self.mesh, self.dofmap, self.materials)
-        self.problem = ElasticProblem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s)
+        if self.fault_settings:
+            from .solver.problem import FaultProblem
+            self.problem = FaultProblem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s,
+                                        self.fault_settings, self.fault_id, self.pairs, self.pair_S, self.materials,
+                                        self.contact_opts)
+        else:
+            self.problem = ElasticProblem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s)
         self.snes = self.problem.create_snes()
         check_unused_petsc_options(PETSc, reader)
         stage.pop()
@@ -73,15 +115,7 @@ class Simulation:
 
     # ------------------------------------------------------------------------------------------
     def _solve(self, t):
-        p = self.problem
-        p.set_load(t)
-        t0 = time.perf_counter()
-        self.snes.solve(None, p.u)
-        wall = time.perf_counter() - t0
-        reason = self.snes.getConvergedReason()
-        return {"time_s": float(t), "newton_its": int(self.snes.getIterationNumber()),
-                "ksp_its": int(self.snes.getLinearSolveIterations()), "wall_s": wall,
-                "converged": bool(reason > 0), "reason": int(reason)}
+        return self.problem.solve_step(self.snes, t)
 
     def _surface_figures(self):
         """Maximum subsidence and horizontal displacement on the ground surface (relative to the initial state)."""
@@ -103,16 +137,57 @@ class Simulation:
         from mpi4py import MPI
         return mpi.allreduce(sub, op=MPI.MAX), mpi.allreduce(hor, op=MPI.MAX), loc
 
+    def _output_mesh(self):
+        """Output mesh on rank 0: split fault vertices appear twice, plus-side cells use the copies."""
+        pts, tets = self.serial.points, self.serial.tets
+        if self.split is None:
+            return pts, tets
+        sv = self.split.split_vertices
+        copy = np.full(len(pts), -1)
+        copy[sv] = len(pts) + np.arange(len(sv))
+        tets = np.where(self.split.cell_side == 1, copy[tets], tets)
+        return np.concatenate([pts, pts[sv]]), tets
+
     def _output(self, step, t, u_rel_local):
         p = self.problem
-        pts = distributed.gather_vertex_values(self.mesh, u_rel_local[self.dofmap.vertex_dofs(0)])
+        both = np.concatenate([u_rel_local[self.dofmap.vertex_dofs(0)], u_rel_local[self.dofmap.vertex_dofs(1)]],
+                              axis=1)
+        pts = distributed.gather_vertex_values(self.mesh, both)
         u_total = p.local_array(p.u)
         sig = p.cell_total_stress(u_total, t).reshape(-1, 9)
         dp = p.cell_dp(t) if p.drawdown.active else np.zeros(len(sig))
         cells = distributed.gather_cell_values(self.mesh, np.column_stack([dp, sig]))
+        faults = self._fault_fields(u_total, u_rel_local) if self.fault_settings else None
         if self.comm.rank == 0:
-            self.writer.write_step(t, {"displacement": pts},
+            u = pts[:, :3]
+            if self.split is not None:
+                u = np.concatenate([u, pts[self.split.split_vertices, 3:]])
+            self.writer.write_step(t, {"displacement": u},
                                    {"pore_pressure_change": cells[:, 0], "stress": cells[:, 1:10]})
+            if faults is not None:
+                self.writer.write_fault_step(t, faults)
+
+    def _fault_fields(self, u_total, u_rel):
+        """Per fault face (serial order, on every rank): tractions from the total state, jumps relative to the
+        initial state."""
+        fs = self.problem.faults
+        t_loc, _, t_glob, _, state = fs.face_fields(u_total)
+        g, gl = fs.jumps(u_rel)
+        slip = g - gl[:, :1] * fs.normal
+        data = np.column_stack([t_loc[:, 0], t_glob - t_loc[:, :1] * fs.normal, gl[:, 0], slip,
+                                np.linalg.norm(gl[:, 1:], axis=1), state])
+        allf = fs.gather_faces(data)
+        return {"traction_normal": allf[:, 0], "traction_shear": allf[:, 1:4], "opening": allf[:, 4],
+                "slip": allf[:, 5:8], "slip_magnitude": allf[:, 8], "state": allf[:, 9].astype(np.int64)}
+
+    def _fault_figures(self, u_rel_local):
+        fs = self.problem.faults
+        g, gl = fs.jumps(u_rel_local)
+        op = float(np.max(gl[:, 0], initial=0.0))
+        sl = float(np.max(np.linalg.norm(gl[:, 1:], axis=1), initial=0.0))
+        from mpi4py import MPI
+        mpi = self.comm.tompi4py()
+        return mpi.allreduce(op, op=MPI.MAX), mpi.allreduce(sl, op=MPI.MAX)
 
     def run(self):
         s = self.settings
@@ -139,8 +214,10 @@ class Simulation:
         out_stage.push()
         if self.comm.rank == 0:
             from .io.output import RunWriter
-            self.writer = RunWriter(s.output_dir, self.serial.points, self.serial.tets, self.serial.cell_material,
-                                    self.material_names)
+            points, tets = self._output_mesh()
+            self.writer = RunWriter(s.output_dir, points, tets, self.serial.cell_material, self.material_names,
+                                    fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
+                                                                                self.split.fault_id))
             self.writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
         self._output(0, 0.0, np.zeros(self.dofmap.n_local))
         out_stage.pop()
@@ -154,6 +231,8 @@ class Simulation:
             self.wall["solve"] += rec["wall_s"]
             sub, hor, u_rel = self._surface_figures()
             rec["max_subsidence_m"], rec["max_horizontal_displacement_m"] = sub, hor
+            if self.fault_settings:
+                rec["max_fault_opening_m"], rec["max_fault_slip_m"] = self._fault_figures(u_rel)
             steps.append(rec)
             self._progress(step, rec)
             t0 = time.perf_counter()
@@ -169,9 +248,13 @@ class Simulation:
 
     def _progress(self, step, rec):
         extra = ""
+        if "stick" in rec:
+            extra += f"  stick/slip/open {rec['stick']}/{rec['slip']}/{rec['open']}"
         if "max_subsidence_m" in rec:
-            extra = f" subsidence {rec['max_subsidence_m']:.4g} m"
-        _print(f"step {step:4d} t = {rec['time_s'] / (365.25 * 86400):9.4g} yr  newton {rec['newton_its']:2d}  "
+            extra += f"  subsidence {rec['max_subsidence_m']:.4g} m"
+        if "max_fault_opening_m" in rec:
+            extra += f"  opening {rec['max_fault_opening_m']:.3g} m  slip {rec['max_fault_slip_m']:.3g} m"
+        _print(f"step {step:4d} t = {_fmt_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
                f"ksp {rec['ksp_its']:4d}  wall {rec['wall_s']:7.2f} s{extra}"
                + ("" if rec["converged"] else f"  NOT CONVERGED (reason {rec['reason']})"))
 
@@ -181,13 +264,15 @@ class Simulation:
             "scene": self.settings.scene,
             "ranks": self.comm.size,
             "mesh": {"nodes": int(self.mesh.n_global_vertices), "cells": int(self.mesh.n_global_cells),
-                     "fault_faces": 0},
+                     "fault_faces": int(len(self.fault_id)) if self.fault_settings else 0},
             "fields": list(self.dofmap.fields),
             "dofs": int(self.problem.u.getSize()),
             "steps": steps,
             "max_subsidence_m": max([r["max_subsidence_m"] for r in last], default=0.0),
             "max_horizontal_displacement_m": max([r["max_horizontal_displacement_m"] for r in last], default=0.0),
             "final_subsidence_m": last[-1]["max_subsidence_m"] if last else 0.0,
+            "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
+            "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
             "converged": bool(converged),
         }
         return self.summary

@@ -51,12 +51,12 @@ def git_hash():
 class RunWriter:
     """Writes a run's directory; every method is called on rank 0 only."""
 
-    def __init__(self, path, points, cells, cell_material, material_names):
+    def __init__(self, path, points, cells, cell_material, material_names, fault_mesh=None):
         os.makedirs(path, exist_ok=True)
         self.path = path
         import meshio
         self._meshio = meshio
-        for name in ("fields.xdmf", "fields.h5"):
+        for name in ("fields.xdmf", "fields.h5", "fault.xdmf", "fault.h5"):
             if os.path.exists(os.path.join(path, name)):
                 os.remove(os.path.join(path, name))
         # meshio opens the .h5 beside the current directory, not beside the .xdmf: open it from there
@@ -71,6 +71,29 @@ class RunWriter:
         self._writer.write_points_cells(points, [("tetra", np.asarray(cells, dtype=np.int64))])
         self.cell_material = np.asarray(cell_material, dtype=np.int64)
         self.material_names = material_names
+        self._fault = None
+        if fault_mesh is not None:
+            self._fault = self._open("fault.xdmf")
+            fpoints, ffaces, fid = fault_mesh
+            self._fault.write_points_cells(fpoints, [("triangle", np.asarray(ffaces, dtype=np.int64))])
+            self.fault_id = np.asarray(fid, dtype=np.int64)
+
+    def _open(self, name):
+        import meshio
+        w = meshio.xdmf.TimeSeriesWriter(name)
+        cwd = os.getcwd()
+        os.chdir(self.path)
+        try:
+            w.__enter__()
+        finally:
+            os.chdir(cwd)
+        w.filename = pathlib.Path(os.path.abspath(os.path.join(self.path, name)))
+        return w
+
+    def write_fault_step(self, t, data):
+        cd = {"fault": [self.fault_id]}
+        cd.update({k: [np.asarray(v)] for k, v in data.items()})
+        self._fault.write_data(t, cell_data=cd)
 
     def write_step(self, t, point_data, cell_data):
         cd = {"material": [self.cell_material]}
@@ -81,6 +104,9 @@ class RunWriter:
         if self._writer is not None:
             self._writer.__exit__(None, None, None)
             self._writer = None
+        if self._fault is not None:
+            self._fault.__exit__(None, None, None)
+            self._fault = None
 
     def write_metadata(self, options, argv):
         with open(os.path.join(self.path, "options.txt"), "w") as fh:

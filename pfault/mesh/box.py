@@ -37,7 +37,24 @@ def layer_z_nodes(lz, nz, interfaces):
     return np.concatenate(zs)[::-1]  # increasing
 
 
-def box_mesh(size, cells, materials=("soil",), interfaces=(), xs=None, ys=None, zs=None):
+def parse_planes(specs):
+    """'name:axis:value[:lo1:hi1:lo2:hi2]' -> (name, axis, value, bounds of the two other coordinates)."""
+    planes = []
+    for spec in specs:
+        parts = spec.split(":")
+        if len(parts) not in (3, 7) or parts[1] not in ("x", "y", "z"):
+            raise InputError(f"-pfault_box_fault_planes: '{spec}' is not name:axis:value[:lo1:hi1:lo2:hi2] "
+                             "(example: fault:x:500)")
+        try:
+            nums = [float(v) for v in parts[2:]]
+        except ValueError:
+            raise InputError(f"-pfault_box_fault_planes: '{spec}' has a value that is not a number") from None
+        bounds = nums[1:] if len(nums) == 5 else [-np.inf, np.inf, -np.inf, np.inf]
+        planes.append((parts[0], "xyz".index(parts[1]), nums[0], bounds))
+    return planes
+
+
+def box_mesh(size, cells, materials=("soil",), interfaces=(), xs=None, ys=None, zs=None, planes=()):
     lx, ly, lz = size
     nx, ny, nz = (int(c) for c in cells)
     if min(nx, ny, nz) < 1 or min(lx, ly, lz) <= 0:
@@ -49,6 +66,13 @@ def box_mesh(size, cells, materials=("soil",), interfaces=(), xs=None, ys=None, 
     xs = np.linspace(0.0, lx, nx + 1) if xs is None else np.asarray(xs, float)
     ys = np.linspace(0.0, ly, ny + 1) if ys is None else np.asarray(ys, float)
     zs = layer_z_nodes(lz, nz, list(interfaces)) if zs is None else np.asarray(zs, float)
+    grids = [xs, ys, zs]
+    for name, axis, value, bounds in planes:
+        g = grids[axis]
+        if not g[0] < value < g[-1]:
+            raise InputError(f"-pfault_box_fault_planes: plane '{name}' at {value} is not inside the box")
+        grids[axis] = np.unique(np.concatenate([g, [value]]))
+    xs, ys, zs = grids
     nx, ny, nz = len(xs) - 1, len(ys) - 1, len(zs) - 1
     X, Y, Z = np.meshgrid(xs, ys, zs, indexing="ij")
     points = np.column_stack([X.ravel(), Y.ravel(), Z.ravel()])
@@ -73,5 +97,22 @@ def box_mesh(size, cells, materials=("soil",), interfaces=(), xs=None, ys=None, 
                        ("ymin", np.abs(c[:, 1] - ys[0]) < tol), ("ymax", np.abs(c[:, 1] - ys[-1]) < tol),
                        ("bottom", np.abs(c[:, 2] - zs[0]) < tol), ("top", np.abs(c[:, 2] - zs[-1]) < tol)):
         surfaces[name] = tri[mask]
+    if planes:
+        from .serial import TET_FACES as TF
+        faces = tets[:, TF].reshape(-1, 3)
+        key = np.sort(faces, axis=1)
+        key = (key[:, 0] * len(points) + key[:, 1]) * len(points) + key[:, 2]
+        ukey, first = np.unique(key, return_index=True)
+        faces = faces[first]
+        fx = points[faces]
+        for name, axis, value, bounds in planes:
+            on = np.all(np.abs(fx[:, :, axis] - value) < tol, axis=1)
+            o = [a for a in range(3) if a != axis]
+            c = fx.mean(axis=1)
+            inside = ((c[:, o[0]] > bounds[0]) & (c[:, o[0]] < bounds[1]) & (c[:, o[1]] > bounds[2])
+                      & (c[:, o[1]] < bounds[3]))
+            interior = np.all(fx[:, :, axis] > grids[axis][0] + tol, axis=1) & np.all(
+                fx[:, :, axis] < grids[axis][-1] - tol, axis=1)
+            surfaces[name] = faces[on & inside & interior]
     return SerialMesh(points=points, tets=tets, cell_material=cell_material.astype(np.int64),
                       material_names=list(materials), surfaces=surfaces, source="box").check()

@@ -39,10 +39,31 @@ class LocalMesh:
     def cell_face_tag(self):
         return self.cell_data[:, 5:9]
 
+    @property
+    def cell_side(self):
+        """(nc,4) 1 where the cell uses the plus-side dofs of a split fault vertex."""
+        return self.cell_data[:, 9:13]
+
+    @property
+    def cell_fault_face(self):
+        """(nc,4) serial id of the fault face on local face k when this cell is its minus cell, else -1."""
+        return self.cell_data[:, 13:17]
+
+    @property
+    def vert_sides(self):
+        return self.vert_data[:, 2]
+
+    @property
+    def vert_displacement_bc(self):
+        return self.vert_data[:, 3]
+
 
 # payload layout: every point row has the same number of int columns
-CELL_COLUMNS = 9     # 4 serial vertex ids, material, 4 face tags (-1: none)
-VERT_COLUMNS = 2     # constraint mask (bit i: component i fixed), ground-surface flag
+# cells: 4 serial vertex ids, material, 4 boundary face tags (-1: none), 4 fault sides, 4 minus fault faces
+CELL_COLUMNS = 17
+# vertices: constraint mask (bit i: component i fixed), ground-surface flag, displacement sides (1 or 2),
+# index of the prescribed-displacement boundary (-1: none)
+VERT_COLUMNS = 4
 PAYLOAD = max(CELL_COLUMNS, VERT_COLUMNS)
 
 
@@ -53,7 +74,7 @@ def _int_type(width):
     return t
 
 
-def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=None):
+def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=None, split=None):
     """Create, distribute and localise the mesh. ``serial`` and the per-entity arrays live on rank 0."""
     rank = comm.rank
     itype = PETSc.IntType
@@ -77,7 +98,19 @@ def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=No
         if cell_face_tag is not None:
             root[:nc, 5:9] = cell_face_tag
         root[nc:, 0] = 0 if vert_constraint is None else vert_constraint
-        root[nc:, 1] = 0 if vert_ground is None else vert_ground
+        if vert_ground is not None:
+            vg = np.asarray(vert_ground).reshape(nv, -1)
+            root[nc:, 1] = vg[:, 0]
+            root[nc:, 3] = vg[:, 1] if vg.shape[1] > 1 else -1
+        else:
+            root[nc:, 1] = 0
+            root[nc:, 3] = -1
+        root[nc:, 2] = 1
+        root[:nc, 9:13] = 0
+        if split is not None:
+            root[nc:, 2] = split.vert_sides
+            root[:nc, 9:13] = split.cell_side
+            root[split.minus_cell, 13 + split.minus_lface] = np.arange(len(split.minus_cell))
     serial_id = np.concatenate([np.arange(nc), np.arange(nv)]).astype(itype)
 
     part = dm.getPartitioner()

@@ -26,16 +26,15 @@ class ElasticProblem:
 
         self.log_assembly.begin()
         t0 = time.perf_counter()
-        self.K = self.dm.createMatrix()
-        self.K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        assembler.add_stiffness(self.K)
-        self.K.assemble()
+        self.K = self._build_operator()
         self.bc_rows = self._constrained_rows()
+        self.lifts = self._prescribed_displacements()
         self.K.zeroRowsColumns(self.bc_rows, diag=1.0)
         self.assembly_wall = time.perf_counter() - t0
         self.log_assembly.end()
         self.nullspace = rigid_body_modes(mesh, dofmap, self.dm)
         self.K.setNearNullSpace(self.nullspace)
+        self._after_operator()
 
         self.u = self.dm.createGlobalVec()
         self.u.setName("displacement")
@@ -44,25 +43,67 @@ class ElasticProblem:
         self.F = self.u.duplicate()
         self.static_local = np.zeros(dofmap.n_local)
         self.sigma0 = None
-        tractions = [b.traction for b in boundaries]
-        if any(b.kind == "traction" for b in boundaries):
-            assembler.traction_load(tractions, self.static_local)
+        # boundary loads per surface, scaled by the surface's history at each time
+        self.surface_loads = []
+        for i, b in enumerate(boundaries):
+            if b.kind in ("traction", "displacement") and any(b.traction):
+                loc = np.zeros(dofmap.n_local)
+                tr = [bb.traction if j == i else (0.0, 0.0, 0.0) for j, bb in enumerate(boundaries)]
+                assembler.traction_load(tr, loc)
+                self.surface_loads.append((b, loc))
+
+    def _build_operator(self):
+        K = self.dm.createMatrix()
+        K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        self.asm.add_stiffness(K)
+        K.assemble()
+        return K
+
+    def _after_operator(self):
+        pass
 
     # -- constraints ---------------------------------------------------------------------------
-    def _constrained_rows(self):
+    def _constrained_local(self):
+        """Boolean mask of the local dofs fixed by Dirichlet conditions."""
         mask = self.mesh.vert_data[:, 0]
-        loc = np.zeros(self.dofmap.n_local)
+        loc = np.zeros(self.dofmap.n_local, dtype=bool)
         for side in (0, 1):
             sel = self.dofmap.vert_sides > side
             dofs = self.dofmap.vertex_dofs(side)[sel]
             bits = (mask[sel, None] >> np.arange(3)) & 1
-            loc[dofs[bits == 1]] = 1.0
+            loc[dofs[bits == 1]] = True
+        return loc
+
+    def _constrained_rows(self):
+        loc = self._constrained_local().astype(float)
         g = self._to_global(loc, PETSc.InsertMode.INSERT_VALUES)
         start, _ = g.getOwnershipRange()
         rows = (np.nonzero(g.getArray() > 0.5)[0] + start).astype(PETSc.IntType)
         g.destroy()
         self.bc_local_owned = rows - start
         return rows
+
+    def _prescribed_displacements(self):
+        """For each displacement boundary: (boundary, g on its constrained dofs, lift = -K g) as global Vecs."""
+        out = []
+        which = self.mesh.vert_displacement_bc
+        mask = self.mesh.vert_data[:, 0]
+        for i, b in enumerate(self.boundaries):
+            if b.kind != "displacement" or not any(b.displacement):
+                continue
+            loc = np.zeros(self.dofmap.n_local)
+            for side in (0, 1):
+                sel = (self.dofmap.vert_sides > side) & (which == i)
+                dofs = self.dofmap.vertex_dofs(side)[sel]
+                bits = ((mask[sel, None] >> np.arange(3)) & 1) * ((b.components >> np.arange(3)) & 1)
+                vals = np.broadcast_to(np.asarray(b.displacement), dofs.shape)
+                loc[dofs[bits == 1]] = vals[bits == 1]
+            g = self._to_global(loc, PETSc.InsertMode.INSERT_VALUES)
+            lift = g.duplicate()
+            self.K.mult(g, lift)
+            lift.scale(-1.0)
+            out.append((b, g, lift))
+        return out
 
     def _to_global(self, local_array, mode=PETSc.InsertMode.ADD_VALUES, out=None):
         lv = self.dm.getLocalVec()
@@ -87,10 +128,17 @@ class ElasticProblem:
 
     def set_load(self, t):
         loc = self.static_local.copy()
+        for b, fl in self.surface_loads:
+            loc += b.scale(t) * fl
         if self.drawdown.active:
             self.asm.pore_pressure_load(self.cell_dp(t), loc)
         self._to_global(loc, out=self.f)
-        self.f.getArray()[self.bc_local_owned] = 0.0
+        for b, g, lift in self.lifts:
+            self.f.axpy(b.scale(t), lift)
+        arr = self.f.getArray()
+        arr[self.bc_local_owned] = 0.0
+        for b, g, lift in self.lifts:
+            arr[self.bc_local_owned] += b.scale(t) * g.getArray()[self.bc_local_owned]
 
     def geostatic_prestress(self, snes):
         """Elastic gravity solve, then horizontal effective stress set by K0; returns sigma0 per cell."""
@@ -99,10 +147,8 @@ class ElasticProblem:
         self.asm.gravity_load(s.gravity, grav)
         self._to_global(grav, out=self.f)
         self.f.getArray()[self.bc_local_owned] = 0.0
-        ksp = snes.getKSP()
         ug = self.u.duplicate()
-        ksp.setOperators(self.K, self.K)
-        ksp.solve(self.f, ug)
+        self._solve_gravity(snes, ug)
         sig = self.asm.effective_stress(self.local_array(ug))
         ug.destroy()
         z = self.asm.centroids[:, 2]
@@ -120,6 +166,11 @@ class ElasticProblem:
         self.asm.initial_stress_load(sigma0, self.static_local)
         return sigma0
 
+    def _solve_gravity(self, snes, ug):
+        ksp = snes.getKSP()
+        ksp.setOperators(self.K, self.K)
+        ksp.solve(self.f, ug)
+
     # -- SNES callbacks --------------------------------------------------------------------------
     def residual(self, snes, x, F):
         self.log_residual.begin()
@@ -130,6 +181,15 @@ class ElasticProblem:
     def jacobian(self, snes, x, J, P):
         # linear skeleton: K is assembled once; an unchanged operator keeps its factorisation
         pass
+
+    def solve_step(self, snes, t):
+        self.set_load(t)
+        t0 = time.perf_counter()
+        snes.solve(None, self.u)
+        reason = snes.getConvergedReason()
+        return {"time_s": float(t), "newton_its": int(snes.getIterationNumber()),
+                "ksp_its": int(snes.getLinearSolveIterations()), "wall_s": time.perf_counter() - t0,
+                "converged": bool(reason > 0), "reason": int(reason)}
 
     def create_snes(self):
         apply_solver_defaults(linear=True)
@@ -156,3 +216,162 @@ class ElasticProblem:
     def destroy(self):
         for obj in (self.K, self.u, self.u_ref, self.f, self.F, self.nullspace):
             obj.destroy()
+        for _, g, lift in self.lifts:
+            g.destroy()
+            lift.destroy()
+
+
+class FaultProblem(ElasticProblem):
+    """Elasticity with fault interfaces: F(x) = K u - f + interface terms; Newton on a fixed active set,
+    repeated until the stick/slip/open configuration settles."""
+
+    def __init__(self, mesh, dofmap, assembler, boundaries, drawdown, settings, fault_settings, fault_id, pairs,
+                 pair_S, materials, contact_opts):
+        self.fault_settings = fault_settings
+        self._fault_args = (fault_id, pairs, pair_S, materials)
+        self.contact_opts = contact_opts
+        super().__init__(mesh, dofmap, assembler, boundaries, drawdown, settings)
+
+    def _build_operator(self):
+        from .fault import FaultSystem
+        fault_id, pairs, pair_S, materials = self._fault_args
+        K0 = self.dm.createMatrix()
+        K0.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        bc_local = self._constrained_local()
+        self.faults = FaultSystem(self.mesh, self.dofmap, self.fault_settings, fault_id, pairs, pair_S, materials,
+                                  bc_local, self.dm.getLGMap())
+        self.asm.add_stiffness(K0)
+        self.faults.insert_pattern(K0)
+        K0.assemble()
+        rows, cols = self.faults.stabilization_pattern()
+        if self.comm.tompi4py().allreduce(len(rows)) > 0:
+            K = _extend_pattern(K0, rows, cols)
+            K0.destroy()
+        else:
+            K = K0
+        return K
+
+    def _after_operator(self):
+        self.J = self.K.duplicate(copy=True)
+        self.J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        self.J.setNearNullSpace(self.nullspace)
+        self.F_local = np.zeros(self.dofmap.n_local)
+
+    def _lm_all(self, x_loc):
+        f = self.faults
+        t = np.zeros((f.nf, 3))
+        if f.has_lagrange:
+            t = f.tractions(x_loc)
+        return f.gather_faces(t) if len(f.pairs) else None
+
+    def residual(self, snes, x, F):
+        self.log_residual.begin()
+        self.K.mult(x, F)
+        F.axpy(-1.0, self.f)
+        x_loc = self.local_array(x)
+        out = np.zeros(self.dofmap.n_local)
+        self.faults.residual(x_loc, self._lm_all(x_loc), out)
+        g = self._to_global(out)
+        F.axpy(1.0, g)
+        g.destroy()
+        self.log_residual.end()
+
+    def jacobian(self, snes, x, J, P):
+        self.K.copy(self.J, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        x_loc = self.local_array(x)
+        self.faults.add_jacobian(x_loc, self._lm_all(x_loc), self.J)
+        self.J.assemble()
+
+    def create_snes(self):
+        apply_solver_defaults(linear=False)
+        snes = PETSc.SNES().create(comm=self.comm)
+        snes.setDM(self.dm)
+        snes.getKSP().setDMActive(False)
+        snes.setFunction(self.residual, self.F)
+        snes.setJacobian(self.jacobian, self.J, self.J)
+        snes.setFromOptions()
+        snes.setConvergenceHistory()
+        snes.setUp()
+        self.jacobian(snes, self.u, self.J, self.J)
+        ksp = snes.getKSP()
+        ksp.setOperators(self.J, self.J)
+        ksp.setUp()
+        return snes
+
+    def _solve_gravity(self, snes, ug):
+        """Elastic gravity state with every fault face glued (stick, zero previous jump)."""
+        self.faults.begin_step(np.zeros(self.dofmap.n_local))
+        saved = self.faults.state.copy()
+        self.faults.state[:] = 0
+        self.faults._sync_state()
+        snes.solve(None, ug)
+        self.faults.state = saved
+        self.faults._sync_state()
+
+    def solve_step(self, snes, t):
+        """Newton solves until the active set settles; returns the step record."""
+        import time as _time
+        o = self.contact_opts
+        self.set_load(t)
+        x_loc = self.local_array(self.u)
+        self.faults.begin_step(x_loc)
+        t0 = _time.perf_counter()
+        newton = ksp = 0
+        history = []
+        settled = False
+        converged = True
+        reason = 0
+        total_area = self.comm.tompi4py().allreduce(float(self.faults.area.sum()))
+        for it in range(1, o["max_active_set_its"] + 1):
+            snes.solve(None, self.u)
+            reason = snes.getConvergedReason()
+            newton += snes.getIterationNumber()
+            ksp += snes.getLinearSolveIterations()
+            history.append([float(v) for v in snes.getConvergenceHistory()[0]])
+            if reason <= 0:
+                converged = False
+                break
+            x_loc = self.local_array(self.u)
+            changed = self.faults.update_active_set(x_loc, o["traction_tol"], o["opening_tol"], o["slip_tol"])
+            if changed <= o["active_set_tol"] * total_area:
+                settled = True
+                break
+        x_loc = self.local_array(self.u)
+        counts = self.faults.counts_by_state(x_loc)
+        rec = {"time_s": float(t), "newton_its": int(newton), "ksp_its": int(ksp),
+               "wall_s": _time.perf_counter() - t0, "active_set_its": it, "active_set_settled": bool(settled),
+               "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
+        rec.update(counts)
+        if converged and not settled:
+            rec["reason"] = "active set did not settle"
+        return rec
+
+    def destroy(self):
+        super().destroy()
+        self.J.destroy()
+
+
+def _extend_pattern(K0, rows, cols):
+    """A new AIJ matrix with K0's values and pattern plus explicit zeros at (rows, cols) (owned rows)."""
+    rstart, rend = K0.getOwnershipRange()
+    indptr, indices, values = K0.getValuesCSR()
+    nrows = rend - rstart
+    r_old = np.repeat(np.arange(nrows), np.diff(indptr))
+    r_all = np.concatenate([r_old, np.asarray(rows) - rstart])
+    c_all = np.concatenate([indices, np.asarray(cols)])
+    v_all = np.concatenate([values, np.zeros(len(rows))])
+    if len(rows) and (np.min(r_all) < 0 or np.max(r_all) >= nrows):
+        raise RuntimeError("stabilisation rows must be owned")
+    ncols = K0.getSize()[1]
+    key = r_all.astype(np.int64) * ncols + c_all.astype(np.int64)
+    uniq, inv = np.unique(key, return_inverse=True)
+    vals = np.zeros(len(uniq))
+    np.add.at(vals, inv, v_all)
+    r_u = (uniq // ncols).astype(np.int64)
+    c_u = (uniq % ncols).astype(PETSc.IntType)
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(r_u, minlength=nrows))]).astype(PETSc.IntType)
+    K = PETSc.Mat().createAIJ(size=K0.getSizes(), csr=(ptr, c_u, vals), comm=K0.getComm())
+    K.setLGMap(*K0.getLGMap())
+    K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    K.assemble()
+    return K

@@ -1,0 +1,262 @@
+"""Split-node fault topology on the serial mesh (pure NumPy).
+
+A fault is a named physical surface made of interior tetrahedron faces. Each fault face gets an
+orientation (normal from the minus to the plus side) and its two tetrahedra. Every fault vertex whose
+star (the tetrahedra containing it) falls apart into two pieces once the fault faces are cut is *split*:
+it carries a second set of dofs used by the tetrahedra of the plus-side piece. A fault vertex whose star
+stays connected (the fault edge buried in the solid) is a *tip* and is not split.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from .serial import TET_FACES, SerialMesh, face_keys, locate_faces
+
+JUNCTION_FIX = "fault junctions are not supported yet; make the faults end apart or merge them into one surface"
+
+
+@dataclass
+class FaultSplit:
+    names: list            # fault surface names in order
+    vert_sides: np.ndarray  # (nv,) int64: 2 for split fault vertices, 1 otherwise
+    cell_side: np.ndarray  # (nc,4) int64: 1 where the cell uses the plus-side dofs at that local vertex
+    faces: np.ndarray      # (nf,3) int64, (x1-x0)x(x2-x0) points from the minus to the plus side
+    fault_id: np.ndarray   # (nf,) index into names
+    minus_cell: np.ndarray
+    minus_lface: np.ndarray
+    plus_cell: np.ndarray
+    plus_lface: np.ndarray
+    normal: np.ndarray     # (nf,3) unit normals (minus -> plus)
+    area: np.ndarray       # (nf,)
+    tip_vertices: np.ndarray  # sorted ids of fault vertices that are not split
+
+    @property
+    def split_vertices(self):
+        return np.nonzero(self.vert_sides == 2)[0]
+
+
+def _components(n, a, b, rel=None):
+    """Connected components of an undirected graph on n nodes by min-label propagation with pointer jumping.
+
+    ``a, b`` hold every edge in both directions. With ``rel`` (0/1 per directed edge) a parity is carried
+    along: ``parity[b] == parity[a] ^ rel`` is what the edges ask for, relative to the component's root.
+    Returns (label, parity): label is the smallest node id of the component.
+    """
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    rel = np.zeros(len(a), np.int64) if rel is None else np.asarray(rel, dtype=np.int64)
+    order = np.argsort(a, kind="stable")
+    a, b, rel = a[order], b[order], rel[order]
+    starts = np.flatnonzero(np.r_[True, a[1:] != a[:-1]]) if len(a) else np.zeros(0, np.int64)
+    heads = a[starts]
+    key = 2 * np.arange(n, dtype=np.int64)          # 2*label + parity
+    while True:
+        new = key.copy()
+        if len(a):
+            cand = (key[b] & ~np.int64(1)) | ((key[b] & 1) ^ rel)
+            new[heads] = np.minimum(new[heads], np.minimum.reduceat(cand, starts))
+        lab, par = new >> 1, new & 1
+        new = 2 * lab[lab] + (par ^ (new[lab] & 1))  # pointer jumping: follow the label's own label
+        if np.array_equal(new, key):
+            break
+        key = new
+    return key >> 1, key & 1
+
+
+def _fault_message(names, fault_ids, what):
+    ids = sorted(set(int(i) for i in fault_ids))
+    label = ", ".join(f"'{names[i]}'" for i in ids)
+    return f"fault{'s' if len(ids) > 1 else ''} {label}: {what}"
+
+
+def _empty(mesh, names):
+    nv, nc = len(mesh.points), len(mesh.tets)
+    z = np.zeros(0, np.int64)
+    return FaultSplit(names=list(names), vert_sides=np.ones(nv, np.int64), cell_side=np.zeros((nc, 4), np.int64),
+                      faces=np.zeros((0, 3), np.int64), fault_id=z, minus_cell=z, minus_lface=z, plus_cell=z,
+                      plus_lface=z, normal=np.zeros((0, 3)), area=np.zeros(0), tip_vertices=z)
+
+
+def _gather_triangles(mesh, names):
+    """Fault triangles of all named surfaces (duplicates inside a surface dropped) and their fault id."""
+    nv = len(mesh.points)
+    tris, ids = [], []
+    for i, name in enumerate(names):
+        if name not in mesh.surfaces:
+            raise InputError(f"fault '{name}' is not a physical surface of the mesh "
+                             f"(surfaces: {', '.join(sorted(mesh.surfaces)) or 'none'})")
+        if name in names[:i]:
+            raise InputError(f"fault '{name}' is listed twice; name each fault surface once")
+        t = np.asarray(mesh.surfaces[name], dtype=np.int64).reshape(-1, 3)
+        if len(t) == 0:
+            raise InputError(f"fault '{name}' has no triangles; give the physical surface its mesh faces")
+        _, first = np.unique(face_keys(t, nv), return_index=True)
+        tris.append(t[np.sort(first)])
+        ids.append(np.full(len(first), i, np.int64))
+    tris, ids = np.concatenate(tris), np.concatenate(ids)
+    keys = face_keys(tris, nv)
+    _, inv, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    shared = counts[inv] > 1
+    if np.any(shared):
+        raise InputError(_fault_message(names, ids[shared], f"{int(shared.sum()) // 2} triangles belong to more "
+                                        "than one fault; give each triangle to one fault surface only"))
+    return tris, ids, keys
+
+
+def _orient(points, nv, faces, fault_id, names):
+    """Flip bits that orient every edge-connected fault surface consistently with the sign rule."""
+    nf = len(faces)
+    e0 = faces.ravel()
+    e1 = faces[:, [1, 2, 0]].ravel()
+    tri = np.repeat(np.arange(nf), 3)
+    lo, hi = np.minimum(e0, e1), np.maximum(e0, e1)
+    ekey = lo * nv + hi
+    fwd = (e0 < e1).astype(np.int64)
+    order = np.argsort(ekey, kind="stable")
+    sk = ekey[order]
+    starts = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1]])
+    counts = np.diff(np.r_[starts, len(sk)])
+    if np.any(counts > 2):
+        bad = np.repeat(counts > 2, counts)
+        raise InputError(_fault_message(names, fault_id[tri[order[bad]]],
+                                        f"{int((counts > 2).sum())} edges are shared by more than two fault "
+                                        f"triangles; {JUNCTION_FIX}"))
+    pair = starts[counts == 2]
+    t, u = tri[order[pair]], tri[order[pair + 1]]
+    rel = (fwd[order[pair]] == fwd[order[pair + 1]]).astype(np.int64)   # same direction: one must flip
+    label, flip = _components(nf, np.r_[t, u], np.r_[u, t], np.r_[rel, rel])
+    bad = flip[t] != (flip[u] ^ rel)
+    if np.any(bad):
+        raise InputError(_fault_message(names, fault_id[t[bad]], "the surface is not orientable; "
+                                        "a fault must have two sides"))
+    x = points[faces]
+    cross = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    signed = np.where(flip[:, None] == 1, -cross, cross)
+    comp, cinv = np.unique(label, return_inverse=True)
+    mean = np.stack([np.bincount(cinv, weights=signed[:, k], minlength=len(comp)) for k in range(3)], axis=1)
+    axis = np.argmax(np.abs(mean), axis=1)
+    negative = mean[np.arange(len(comp)), axis] < 0
+    return flip ^ negative[cinv].astype(np.int64)
+
+
+def split_faults(mesh: SerialMesh, names) -> FaultSplit:
+    """Orient the named fault surfaces and decide which vertices split and which cells use the plus side."""
+    names = list(names)
+    if not names:
+        return _empty(mesh, names)
+    points = np.asarray(mesh.points, dtype=np.float64)
+    tets = np.asarray(mesh.tets, dtype=np.int64)
+    nv, nc = len(points), len(tets)
+    tris, fault_id, fkeys = _gather_triangles(mesh, names)
+    nf = len(tris)
+
+    # the cells touching a fault vertex: everything below happens among them
+    is_fv = np.zeros(nv, bool)
+    is_fv[tris.ravel()] = True
+    star = np.flatnonzero(is_fv[tets].any(axis=1))
+    T = tets[star]
+    ns = len(star)
+
+    # rule 1: every fault triangle is an interior face with exactly two tetrahedra
+    ti, cell, lface = locate_faces(T, nv, tris)
+    cnt = np.bincount(ti, minlength=nf)
+    if np.any(cnt != 2):
+        bad = cnt != 2
+        nb, nz = int(np.sum(cnt == 1)), int(np.sum(cnt == 0))
+        raise InputError(_fault_message(names, fault_id[bad], f"{int(bad.sum())} triangles are not shared by two "
+                                        f"tetrahedra ({nb} on the outer boundary, {nz} not faces of the mesh); "
+                                        "embed the fault surface in the volume mesh (gmsh: mesh.embed / fragment)"))
+    c0, l0, c1, l1 = cell[0::2], lface[0::2], cell[1::2], lface[1::2]   # grouped by triangle, two each
+    faces = T[c0[:, None], TET_FACES[l0]]       # outward from c0: n points from c0 into c1
+
+    # rule 2: orientation
+    flip = _orient(points, nv, faces, fault_id, names).astype(bool)
+    faces[flip] = faces[flip][:, [0, 2, 1]]
+    mc, ml = np.where(flip, c1, c0), np.where(flip, l1, l0)
+    pc, pl = np.where(flip, c0, c1), np.where(flip, l0, l1)
+
+    # rule 3: components of each fault vertex's star, connected through non-fault faces containing it.
+    # Nodes are (star cell s, local vertex k) -> 4*s + k; only those at fault vertices get edges.
+    F = T[:, TET_FACES]                                  # (ns,4,3)
+    fl = np.flatnonzero(is_fv[F].any(axis=2).ravel())    # faces with a fault vertex, index 4*s + lf
+    fverts = F.reshape(-1, 3)[fl]
+    k = face_keys(fverts, nv)
+    keep = ~np.isin(k, fkeys)
+    fl, fverts, k = fl[keep], fverts[keep], k[keep]
+    order = np.argsort(k, kind="stable")
+    sk = k[order]
+    same = np.flatnonzero(sk[1:] == sk[:-1])
+    fa, fb = fl[order[same]], fl[order[same + 1]]        # the two sides of each interior non-fault face
+    sa, la = fa // 4, fa % 4
+    sb, lb = fb // 4, fb % 4
+    oa = np.argsort(fverts[order[same]], axis=1)         # local corners sorted by vertex id on both sides
+    ob = np.argsort(fverts[order[same + 1]], axis=1)
+    ka = np.take_along_axis(TET_FACES[la], oa, axis=1)
+    kb = np.take_along_axis(TET_FACES[lb], ob, axis=1)
+    va = np.take_along_axis(fverts[order[same]], oa, axis=1)
+    na, nb = 4 * sa[:, None] + ka, 4 * sb[:, None] + kb
+    m = is_fv[va]
+    na, nb = na[m], nb[m]
+    label, _ = _components(4 * ns, np.r_[na, nb], np.r_[nb, na])
+
+    node_v = T.ravel()
+    inc = np.flatnonzero(is_fv[node_v])                  # (vertex, cell) incidences at fault vertices
+    iv, il = node_v[inc], label[inc]
+    pairs = np.unique(iv * (4 * ns) + il)
+    ncomp = np.bincount(pairs // (4 * ns), minlength=nv)
+
+    # the component of the minus (plus) cells at each vertex
+    big = np.iinfo(np.int64).max
+    mnode = (4 * mc[:, None] + TET_FACES[ml]).ravel()
+    pnode = (4 * pc[:, None] + TET_FACES[pl]).ravel()
+    mv, pv = node_v[mnode], node_v[pnode]
+    mlab_lo = np.full(nv, big)
+    mlab_hi = np.full(nv, -1)
+    _reduce(np.minimum, mlab_lo, mv, label[mnode])
+    _reduce(np.maximum, mlab_hi, mv, label[mnode])
+    tri_of = np.repeat(np.arange(nf), 3)
+
+    many = ncomp > 2
+    if np.any(many):
+        bad = many[mv]
+        raise InputError(_fault_message(names, fault_id[tri_of[bad]], f"{int(many.sum())} vertices where fault "
+                                        f"surfaces meet or touch (junction); {JUNCTION_FIX}"))
+    split = ncomp == 2
+    mixed = split & (mlab_lo != mlab_hi)
+    plus_same = np.zeros(nv, bool)
+    plus_same[pv[label[pnode] == mlab_lo[pv]]] = True
+    mixed |= split & plus_same
+    if np.any(mixed):
+        bad = mixed[mv]
+        raise InputError(_fault_message(names, fault_id[tri_of[bad]], f"{int(mixed.sum())} vertices where the "
+                                        f"two sides of the fault cannot be told apart (surfaces touching); "
+                                        f"{JUNCTION_FIX}"))
+
+    vert_sides = np.ones(nv, np.int64)
+    vert_sides[split] = 2
+    cell_side = np.zeros((nc, 4), np.int64)
+    plus = inc[split[iv] & (il != mlab_lo[iv])]
+    cell_side[star[plus // 4], plus % 4] = 1
+
+    x = points[faces]
+    cross = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    norm = np.linalg.norm(cross, axis=1)
+    return FaultSplit(names=names, vert_sides=vert_sides, cell_side=cell_side, faces=faces, fault_id=fault_id,
+                      minus_cell=star[mc], minus_lface=ml.astype(np.int64), plus_cell=star[pc],
+                      plus_lface=pl.astype(np.int64), normal=cross / norm[:, None], area=0.5 * norm,
+                      tip_vertices=np.flatnonzero(is_fv & ~split))
+
+
+def _reduce(ufunc, out, idx, val):
+    """out[idx] = ufunc(out[idx], val) with repeated indices, sort-based (numpy < 1.25 has slow ufunc.at)."""
+    if len(idx) == 0:
+        return
+    order = np.argsort(idx, kind="stable")
+    si = idx[order]
+    starts = np.flatnonzero(np.r_[True, si[1:] != si[:-1]])
+    heads = si[starts]
+    out[heads] = ufunc(out[heads], ufunc.reduceat(val[order], starts))

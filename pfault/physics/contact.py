@@ -1,0 +1,142 @@
+"""Fault contact and Mohr-Coulomb friction on interface faces, vectorised over faces (pure NumPy).
+
+Conventions
+- n: unit normal of a fault face pointing from the minus side to the plus side; R (3x3) has rows
+  (n, m1, m2): local frame normal, strike-like and dip-like tangents.
+- jump g = u_plus - u_minus (face average of the P1 jump); local g_loc = R g; g_N > 0 is opening.
+- traction t (local, the multiplier): the traction the plus side exerts on the minus side; t_N < 0 is
+  compression. The minus side receives +t, the plus side -t.
+- Mohr-Coulomb: |t_T| <= tau_L = c - t_N tan(phi).
+
+Lagrange multiplier rows (per face, area A), as in the stick/slip/open active-set method:
+- stick: r = A [g_N, g_T - g_T^n]           (closed, no incremental slip)
+- slip:  r = A [g_N, t_T - tau_L s]         s = dg_T/|dg_T|, dg_T = g_T - g_T^n
+         (before a slip increment exists, s = t_T/|t_T|: r_T = A t_T (1 - tau_L/|t_T|))
+- open:  r = A t                              (traction-free)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+STICK, SLIP, OPEN = 0, 1, 2
+STATE_NAMES = ("stick", "slip", "open")
+
+
+def local_frames(normal):
+    """Rotation matrices (nf,3,3) with rows n, m1, m2; m1 horizontal (strike) unless n is near vertical."""
+    n = normal / np.linalg.norm(normal, axis=1)[:, None]
+    ref = np.where(np.abs(n[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
+    m1 = np.cross(ref, n)
+    m1 /= np.linalg.norm(m1, axis=1)[:, None]
+    m2 = np.cross(n, m1)
+    return np.stack([n, m1, m2], axis=1)
+
+
+def coulomb_limit(t_n, cohesion, tan_phi):
+    return np.maximum(cohesion - tan_phi * t_n, 0.0)
+
+
+def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_tol):
+    """Residual rows (nf,3) and their derivatives d r/d g_loc (nf,3,3), d r/d t (nf,3,3)."""
+    nf = len(area)
+    r = np.zeros((nf, 3))
+    dg = np.zeros((nf, 3, 3))
+    dt = np.zeros((nf, 3, 3))
+    A = area
+    closed = state != OPEN
+    # normal row of closed faces: A g_N
+    r[closed, 0] = A[closed] * g_loc[closed, 0]
+    dg[closed, 0, 0] = A[closed]
+    stick = state == STICK
+    r[stick, 1:] = A[stick, None] * (g_loc[stick, 1:] - g_prev_loc[stick, 1:])
+    dg[stick, 1, 1] = dg[stick, 2, 2] = A[stick]
+    slip = state == SLIP
+    if np.any(slip):
+        i = np.nonzero(slip)[0]
+        tau = coulomb_limit(t[i, 0], cohesion[i], tan_phi[i])
+        dtau_dtn = np.where(cohesion[i] - tan_phi[i] * t[i, 0] > 0, -tan_phi[i], 0.0)
+        d = g_loc[i, 1:] - g_prev_loc[i, 1:]
+        dn = np.linalg.norm(d, axis=1)
+        moving = dn > slide_tol[i]
+        # slip direction from the slip increment
+        j = i[moving]
+        if len(j):
+            s = d[moving] / dn[moving, None]
+            tm = tau[moving]
+            r[j, 1:] = A[j, None] * (t[j, 1:] - tm[:, None] * s)
+            dt[j, 1, 1] = dt[j, 2, 2] = A[j]
+            dt[j, 1:, 0] = -A[j, None] * dtau_dtn[moving, None] * s
+            proj = np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)
+            dg[j, 1:, 1:] = -(A[j] * tm / dn[moving])[:, None, None] * proj
+        # no increment yet: slip along the traction
+        j = i[~moving]
+        if len(j):
+            tt = t[j, 1:]
+            tn = np.linalg.norm(tt, axis=1)
+            tm = tau[~moving]
+            safe = tn > 0
+            ratio = np.where(safe, tm / np.where(safe, tn, 1.0), 0.0)
+            r[j, 1:] = A[j, None] * tt * (1.0 - ratio)[:, None]
+            eye = np.eye(2)[None]
+            outer = np.einsum("ni,nj->nij", tt, tt) / np.where(safe, tn, 1.0)[:, None, None] ** 3
+            dtt = (1.0 - ratio)[:, None, None] * eye + np.where(safe, tm, 0.0)[:, None, None] * outer
+            dt[j, 1:, 1:] = A[j, None, None] * dtt
+            unit = np.where(safe[:, None], tt / np.where(safe, tn, 1.0)[:, None], 0.0)
+            dt[j, 1:, 0] = -A[j, None] * dtau_dtn[~moving, None] * unit
+    opn = state == OPEN
+    r[opn] = A[opn, None] * t[opn]
+    dt[opn] = A[opn, None, None] * np.eye(3)[None]
+    return r, dg, dt
+
+
+def update_states(state, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol, slip_tol_ratio):
+    """Next active set from the converged solution of the current one (with hysteresis).
+
+    open -> stick when the faces interpenetrate (g_N < -opening_tol);
+    closed -> open when the normal traction is tensile (t_N > traction_tol);
+    stick -> slip when |t_T| > tau_L (1 + slip_tol_ratio); slip -> stick when |t_T| < tau_L (1 - slip_tol_ratio).
+    """
+    new = state.copy()
+    opn = state == OPEN
+    new[opn & (g_loc[:, 0] < -opening_tol)] = STICK
+    closed = ~opn
+    tension = closed & (t[:, 0] > traction_tol)
+    new[tension] = OPEN
+    rest = closed & ~tension
+    tau = coulomb_limit(t[:, 0], cohesion, tan_phi)
+    tt = np.linalg.norm(t[:, 1:], axis=1)
+    new[rest & (state == STICK) & (tt > tau * (1 + slip_tol_ratio) + traction_tol * 1e-3)] = SLIP
+    new[rest & (state == SLIP) & (tt < tau * (1 - slip_tol_ratio))] = STICK
+    return new
+
+
+def penalty_traction(g_loc, g_prev_loc, t_prev, kn, kt, cohesion, tan_phi):
+    """Penalty contact: traction (nf,3), derivative dt/dg_loc (nf,3,3) and state.
+
+    t_N = kn g_N in contact (g_N < 0), 0 when open; tangential return map from t_T^n + kt dg_T.
+    """
+    nf = len(g_loc)
+    t = np.zeros((nf, 3))
+    d = np.zeros((nf, 3, 3))
+    state = np.full(nf, OPEN)
+    closed = g_loc[:, 0] < 0
+    t[closed, 0] = kn[closed] * g_loc[closed, 0]
+    d[closed, 0, 0] = kn[closed]
+    trial = t_prev[:, 1:] + kt[:, None] * (g_loc[:, 1:] - g_prev_loc[:, 1:])
+    tau = coulomb_limit(t[:, 0], cohesion, tan_phi)
+    dtau_dtn = np.where(cohesion - tan_phi * t[:, 0] > 0, -tan_phi, 0.0)
+    tn = np.linalg.norm(trial, axis=1)
+    stick = closed & (tn <= tau)
+    slip = closed & ~stick
+    t[stick, 1:] = trial[stick]
+    d[stick, 1, 1] = d[stick, 2, 2] = kt[stick]
+    state[stick] = STICK
+    if np.any(slip):
+        s = trial[slip] / tn[slip, None]
+        t[slip, 1:] = tau[slip, None] * s
+        proj = np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)
+        d[slip, 1:, 1:] = (tau[slip] * kt[slip] / tn[slip])[:, None, None] * proj
+        d[slip, 1:, 0] = (dtau_dtn[slip] * kn[slip])[:, None] * s
+        state[slip] = SLIP
+    return t, d, state

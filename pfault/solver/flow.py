@@ -1,0 +1,376 @@
+"""Transient groundwater flow (P1, backward Euler) that supplies the pore-pressure change to the skeleton.
+
+    S_s dh/dt - div(K grad h) = -Q delta(wells),   h = 0 at t = 0 and on fixed-head surfaces,
+    dp = rho_w g h   (Pa per cell: the cell average of the P1 head)
+
+One-way coupling: the head does not feel the skeleton's deformation beyond the storage S_s
+(see pfault.physics.flow.specific_storage). Other boundaries are no-flow (natural). The head has one
+dof per mesh vertex, also at split fault vertices: faults are not hydraulic barriers here.
+
+Discretisation
+--------------
+- The head lives on a clone of the mesh DM (``dm.clone()``) with its own scalar PetscSection (field
+  ``head``, one dof per vertex); the displacement section is untouched. The local dof of a vertex is its
+  local vertex index. Matrices come from ``createMatrix()`` of that DM (exact preallocation) and are
+  filled with ``setValuesLocalRCV``: A (conductivity), M (consistent storage mass) and J = M/dt + A.
+- Backward Euler: (M/dt + A) h^{n+1} = M/dt h^n - q(t^{n+1}); rows and columns of fixed-head vertices
+  are replaced by the identity (h = 0 there). J is rebuilt, and the preconditioner set up again, only
+  when dt changes.
+- Wells are vertical line sinks along their screen: the rate is distributed along the part of the
+  axis x = xw, y = yw, z_bottom <= z <= z_top inside the mesh in proportion to K (a screen across layers
+  draws from each in proportion to its conductivity, as with a uniform head in the borehole), and each
+  tetrahedron the axis crosses receives the exact P1 load q_a = Q int_(axis in tet) K phi_a ds /
+  int_(screen) K ds. An axis along a vertical face or edge shared by several tetrahedra is given to one of
+  them by a symbolic perturbation of the axis (pfault.physics.flow.vertical_line_in_tets), a rule
+  based on coordinates only, so the load does not depend on the partition or numbering. Cells are not
+  duplicated across ranks, so per-cell loads are summed into a local vector and added with
+  localToGlobal(ADD) without double counting. The part of the screen outside the mesh is an error.
+- Solver: KSP with prefix ``flow_``; code defaults, each only where the user is silent: -flow_ksp_type cg,
+  -flow_pc_type hypre (BoomerAMG; gamg if PETSc has no hypre), -flow_ksp_rtol 1e-10.
+
+Wiring (for pfault/simulation.py; not done here)
+------------------------------------------------
+In ``Simulation.setup``:
+
+1. After ``self.materials = scn.read_materials(...)``, if ``reader.get("pfault_flow")``:
+       from .solver.flow import read_flow_settings, fixed_head_vertices, FIXED_HEAD_BIT, GroundwaterFlow
+       self.flow_settings = read_flow_settings(reader, self.material_names, self.materials,
+                                               self.surface_names, s.water_density, s.gravity)
+   (reads -pfault_material_<m>_hydraulic_conductivity / _specific_storage / _void_ratio,
+   -pfault_flow_wells, -pfault_flow_well_screen, -pfault_flow_well_rate, -pfault_flow_fixed_head_surfaces,
+   -pfault_flow_substeps; must run before ``reader.check_pfault_options()``). A scene with flow must not
+   also give per-material head_drawdown/pressure_change tables (raise InputError if
+   ``self.drawdown.active``), or sum the two sources.
+2. In ``arrays()`` (rank 0), on the vertex mask returned by ``scn.boundary_arrays``:
+       mask |= FIXED_HEAD_BIT * fixed_head_vertices(serial, self.flow_settings.fixed_head_surfaces)
+   so that the fixed-head flag travels with the vertices (bit 3 of vert_data[:, 0]; the elastic
+   constraints use bits 0-2 only).
+3. After ``distributed.build(...)``, in the Setup stage, before ``check_unused_petsc_options``:
+       fs = self.flow_settings
+       mat = self.mesh.cell_material
+       self.flow = GroundwaterFlow(self.mesh, fs.conductivity[mat], fs.storage[mat], wells=fs.wells,
+                                   fixed_head=(self.mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0,
+                                   substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity)
+   and pass ``self.flow`` instead of ``self.drawdown`` to ``ElasticProblem`` / ``FaultProblem`` (it has
+   ``active`` and
+   ``cell_values(t, cell_material, centroids=None)``; times must not go backwards, which the time loop
+   satisfies). Optionally write ``self.flow.vertex_head()`` (gathered with
+   ``distributed.gather_vertex_values``) as a point field ``head`` (m), and add
+   ``self.flow.history[-1]["ksp_its"]`` to the step record.
+4. ``Simulation.destroy``: ``self.flow.destroy()`` before the mesh DM is destroyed. A FlowNotConverged
+   exception (raised on every rank together) should end the run like a non-converged step (exit 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from ..errors import InputError
+from ..physics import flow as fl
+from ..physics.loading import Table
+from .setup import set_default
+
+HEAD = "head"
+FIXED_HEAD_BIT = 8      # bit 3 of the vertex constraint mask (bits 0-2 are displacement components)
+
+
+class FlowNotConverged(RuntimeError):
+    """The flow KSP did not converge (raised on every rank: the converged reason is collective)."""
+
+
+@dataclass(frozen=True)
+class Well:
+    x: float                      # m
+    y: float                      # m
+    z_top: float                  # m, top of the screen
+    z_bottom: float               # m, bottom of the screen
+    rate: Callable[[float], float]  # Q(t), m**3/s, positive is pumping (extraction)
+
+
+def _as_well(w):
+    """A Well, or a tuple (x, y, z_top, z_bottom, rate) with rate a callable Q(t) or a constant (m**3/s)."""
+    if not isinstance(w, Well):
+        w = Well(*w)
+    if not callable(w.rate):
+        q = float(w.rate)
+        w = Well(w.x, w.y, w.z_top, w.z_bottom, lambda t: q)
+    return w
+
+
+@dataclass(frozen=True)
+class FlowSettings:
+    conductivity: np.ndarray      # (n_materials,) m/s
+    storage: np.ndarray           # (n_materials,) 1/m
+    wells: tuple
+    fixed_head_surfaces: tuple
+    substeps: int
+
+
+# -- options ---------------------------------------------------------------------------------------
+def read_flow_settings(reader, material_names, materials, surface_names, water_density, gravity):
+    """Flow inputs from -pfault_ options (call only when -pfault_flow is true); same verdict on every rank."""
+    cond, stor = [], []
+    for name, m in zip(material_names, materials):
+        p = f"pfault_material_{name}_"
+        k = reader.get(p + "hydraulic_conductivity")
+        if k is None:
+            raise InputError(f"missing -{p}hydraulic_conductivity (m/s) for physical volume '{name}' "
+                             "(needed by -pfault_flow)")
+        if not k > 0:
+            raise InputError(f"-{p}hydraulic_conductivity: must be positive, got {k}")
+        e = reader.get(p + "void_ratio")
+        if not e > 0:
+            raise InputError(f"-{p}void_ratio: must be positive, got {e}")
+        ss = reader.get(p + "specific_storage")
+        if ss is None:
+            ss = float(fl.specific_storage(m.young_modulus, m.poisson_ratio, e, m.biot_coefficient,
+                                           water_density, gravity))
+        elif not ss > 0:
+            raise InputError(f"-{p}specific_storage: must be positive, got {ss}")
+        cond.append(k)
+        stor.append(ss)
+    xy = reader.get("pfault_flow_wells")
+    screen = reader.get("pfault_flow_well_screen")
+    rate = reader.get("pfault_flow_well_rate")
+    wells = ()
+    if xy:
+        if len(xy) % 2:
+            raise InputError("-pfault_flow_wells: give x,y pairs (x1,y1,x2,y2,... in m)")
+        if len(screen) != 2 or not screen[0] > screen[1]:
+            raise InputError("-pfault_flow_well_screen: give z_top,z_bottom (m) with z_top > z_bottom")
+        if rate is None:
+            raise InputError("-pfault_flow_well_rate: give the pumping rate per well as time:rate pairs "
+                             "(example: 0:0,1*year:300*L/s)")
+        table = Table.from_pairs(rate)
+        wells = tuple(Well(xy[i], xy[i + 1], screen[0], screen[1], table) for i in range(0, len(xy), 2))
+    surfaces = tuple(reader.get("pfault_flow_fixed_head_surfaces"))
+    for s in surfaces:
+        if s not in surface_names:
+            raise InputError(f"-pfault_flow_fixed_head_surfaces: no physical surface '{s}' in the mesh "
+                             f"(surfaces: {', '.join(surface_names)})")
+    substeps = reader.get("pfault_flow_substeps")
+    if substeps < 1:
+        raise InputError("-pfault_flow_substeps: need at least 1")
+    return FlowSettings(np.array(cond), np.array(stor), wells, surfaces, substeps)
+
+
+def fixed_head_vertices(serial, surface_names):
+    """(nv,) int 0/1 on the serial mesh (rank 0): vertices on the named physical surfaces."""
+    mask = np.zeros(len(serial.points), np.int64)
+    for name in surface_names:
+        if name not in serial.surfaces:
+            raise InputError(f"-pfault_flow_fixed_head_surfaces: no physical surface '{name}' in the mesh")
+        mask[np.unique(serial.surfaces[name])] = 1
+    return mask
+
+
+# -- the model -------------------------------------------------------------------------------------
+class GroundwaterFlow:
+    """P1 transient flow on a LocalMesh; a pore-pressure source for the mechanics (``cell_values``).
+
+    mesh: LocalMesh; conductivity, storage: (nc,) per local cell (m/s, 1/m) or scalars; wells: Wells or
+    tuples (x, y, z_top, z_bottom, rate), rate a callable Q(t) or a constant (m**3/s, positive is pumping,
+    evaluated at the end of each step); fixed_head: (nv,) bool per local vertex (h = 0 there);
+    substeps: backward-Euler steps per ``advance_to`` call; lumped_mass: lumped instead of consistent
+    storage matrix; prefix: options prefix of the KSP.
+
+    After construction: ``advance_to(t)``, ``step(dt)``, ``cell_values(t, cell_material, centroids)``
+    (dp per local cell, Pa), ``vertex_head()`` (h per local vertex, m), ``time``, ``history`` (one record
+    per step: time_s, dt_s, ksp_its, reason), ``dm`` / ``h`` (the head DM and global Vec), ``destroy()``.
+    """
+
+    def __init__(self, mesh, conductivity, storage, wells=(), fixed_head=None, substeps=1,
+                 water_density=1000.0, gravity=9.80665, lumped_mass=False, prefix="flow_", t0=0.0):
+        self.mesh = mesh
+        self.comm = mesh.dm.getComm()
+        self.wells = tuple(_as_well(w) for w in wells)
+        self.substeps = int(substeps)
+        self.rho_g = water_density * gravity
+        self.prefix = prefix
+        self.time = float(t0)
+        self.history = []
+        self._dt = None
+        self.log_assembly = PETSc.Log.Event("pfaultFlowAssemble")
+        self.log_solve = PETSc.Log.Event("pfaultFlowSolve")
+        nc, nv = len(mesh.cells), len(mesh.coords)
+        conductivity = np.broadcast_to(np.asarray(conductivity, float), (nc,))
+        storage = np.broadcast_to(np.asarray(storage, float), (nc,))
+
+        self.dm = mesh.dm.clone()
+        self.dm.setName("head_mesh")
+        self.section = self._scalar_section(nv)
+        self.dm.setSection(self.section)
+
+        self.log_assembly.begin()
+        grad, vol = fl.tet_geometry(mesh.coords[mesh.cells])
+        self.cells = mesh.cells.astype(PETSc.IntType)
+        self.A = self._assemble(fl.conductivity(grad, vol, conductivity))
+        self.M = self._assemble(fl.mass(vol, storage, lumped=lumped_mass))
+        self.J = self.dm.createMatrix()
+        self.J.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+        self.log_assembly.end()
+
+        self.h = self.dm.createGlobalVec()
+        self.h.setName(HEAD)
+        self.b = self.h.duplicate()
+        self.h_local = np.zeros(nv)
+        fixed = np.zeros(nv, bool) if fixed_head is None else np.asarray(fixed_head, bool)
+        g = self._to_global(fixed.astype(float), PETSc.InsertMode.INSERT_VALUES)
+        start, _ = g.getOwnershipRange()
+        self.bc_local_owned = np.nonzero(g.getArray() > 0.5)[0].astype(PETSc.IntType)
+        self.bc_rows = self.bc_local_owned + start
+        g.destroy()
+        self.well_loads = [self._well_load(w, grad, vol, conductivity) for w in self.wells]
+        self.ksp = self._create_ksp()
+
+    # -- setup -------------------------------------------------------------------------------------
+    def _scalar_section(self, nv):
+        sec = PETSc.Section().create(comm=self.comm)
+        sec.setNumFields(1)
+        sec.setFieldName(0, HEAD)
+        sec.setFieldComponents(0, 1)
+        sec.setChart(*self.dm.getChart())
+        # no array setter in petsc4py 3.18: one call per vertex
+        for v in range(self.mesh.v_start, self.mesh.v_start + nv):
+            sec.setDof(v, 1)
+            sec.setFieldDof(v, 0, 1)
+        sec.setUp()
+        # only vertices carry dofs and they follow the cells in the chart: local dof = local vertex index
+        if nv:
+            assert sec.getOffset(self.mesh.v_start) == 0 and sec.getOffset(self.mesh.v_start + nv - 1) == nv - 1
+        return sec
+
+    def _assemble(self, ke):
+        mat = self.dm.createMatrix()
+        mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+        chunk = 65536
+        for s in range(0, len(ke), chunk):
+            e = slice(s, s + chunk)
+            mat.setValuesLocalRCV(self.cells[e], self.cells[e], ke[e].reshape(-1, 16),
+                                  addv=PETSc.InsertMode.ADD_VALUES)
+        mat.assemble()
+        return mat
+
+    def _to_global(self, local_array, mode=PETSc.InsertMode.ADD_VALUES):
+        lv = self.dm.getLocalVec()
+        lv.setArray(local_array)
+        g = self.dm.createGlobalVec()
+        self.dm.localToGlobal(lv, g, addv=mode)
+        self.dm.restoreLocalVec(lv)
+        return g
+
+    def _well_load(self, well, grad, vol, conductivity):
+        """Global Vec of the load of a unit rate (sums to 1), K-weighted along the screen."""
+        x0 = self.mesh.coords[self.mesh.cells[:, 0]]
+        mpi = self.comm.tompi4py()
+        screen = well.z_top - well.z_bottom
+        if not screen > 0:
+            raise InputError(f"well at ({well.x:g}, {well.y:g}): screen top must lie above its bottom")
+        # the tie-breaking perturbation must point into the mesh: on a boundary (e.g. a symmetry plane at
+        # x = max) the first directions may miss it; the first side that covers the screen is used
+        best = 0.0
+        for side in ((1, 1), (-1, 1), (1, -1), (-1, -1)):
+            length, mid = fl.vertical_line_in_tets(grad, vol, x0, well.x, well.y, well.z_bottom, well.z_top, side)
+            covered = mpi.allreduce(float(length.sum()), op=MPI.SUM)
+            best = max(best, covered)
+            if abs(covered - screen) <= 1e-8 * screen:
+                break
+        else:
+            raise InputError(f"well at ({well.x:g}, {well.y:g}): only {best:g} m of its {screen:g} m screen "
+                             f"(z {well.z_bottom:g} to {well.z_top:g} m) lie inside the mesh; the whole "
+                             "screen must")
+        wk = length * conductivity
+        total_k = mpi.allreduce(float(wk.sum()), op=MPI.SUM)
+        loc = np.bincount(self.mesh.cells.ravel(), weights=(wk[:, None] * mid).ravel() / total_k,
+                          minlength=len(self.mesh.coords))
+        return self._to_global(loc)
+
+    def _create_ksp(self):
+        p = self.prefix
+        opts = PETSc.Options()
+        if not (opts.hasName(p + "ksp_type") or opts.hasName(p + "pc_type")):
+            set_default(p + "ksp_type", "cg")
+            set_default(p + "pc_type", "hypre" if PETSc.Sys.hasExternalPackage("hypre") else "gamg")
+        set_default(p + "ksp_rtol", "1e-10")
+        ksp = PETSc.KSP().create(comm=self.comm)
+        ksp.setOptionsPrefix(p)
+        ksp.setOperators(self.J, self.J)
+        ksp.setInitialGuessNonzero(True)
+        ksp.setFromOptions()
+        return ksp
+
+    def _set_dt(self, dt):
+        """J = A + M/dt with identity rows/columns at fixed heads; the PC is set up again."""
+        self.log_assembly.begin()
+        self.A.copy(self.J, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self.J.axpy(1.0 / dt, self.M, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self.J.zeroRowsColumns(self.bc_rows, diag=1.0)
+        self.ksp.setOperators(self.J, self.J)
+        self._dt = dt
+        self.log_assembly.end()
+
+    # -- time stepping ---------------------------------------------------------------------------------
+    @property
+    def active(self):
+        return len(self.wells) > 0
+
+    def step(self, dt):
+        """One backward-Euler step of length dt (s)."""
+        if self._dt is None or abs(dt - self._dt) > 1e-12 * dt:
+            self._set_dt(dt)
+        t_new = self.time + dt
+        self.log_solve.begin()
+        self.M.mult(self.h, self.b)
+        self.b.scale(1.0 / dt)
+        for well, load in zip(self.wells, self.well_loads):
+            self.b.axpy(-float(well.rate(t_new)), load)
+        self.b.getArray()[self.bc_local_owned] = 0.0
+        self.ksp.solve(self.b, self.h)
+        self.log_solve.end()
+        reason = self.ksp.getConvergedReason()
+        self.history.append({"time_s": t_new, "dt_s": dt, "ksp_its": int(self.ksp.getIterationNumber()),
+                             "reason": int(reason)})
+        if reason <= 0:
+            raise FlowNotConverged(f"groundwater flow: KSP {self.prefix} did not converge at t = {t_new:g} s "
+                                   f"(reason {reason})")
+        self.time = t_new
+        lv = self.dm.getLocalVec()
+        self.dm.globalToLocal(self.h, lv, addv=PETSc.InsertMode.INSERT_VALUES)
+        self.h_local = lv.getArray().copy()
+        self.dm.restoreLocalVec(lv)
+
+    def advance_to(self, t):
+        """Take ``substeps`` equal backward-Euler steps from the current time to t (nothing if t is reached)."""
+        t = float(t)
+        tol = 1e-12 * max(abs(t), abs(self.time), 1.0)
+        if t < self.time - tol:
+            raise ValueError(f"groundwater flow is at t = {self.time:g} s and cannot go back to {t:g} s")
+        if t <= self.time + tol:
+            return
+        t_start = self.time
+        for k in range(1, self.substeps + 1):
+            target = t_start + (t - t_start) * k / self.substeps
+            self.step(target - self.time)
+        self.time = t
+
+    # -- outputs ----------------------------------------------------------------------------------------
+    def vertex_head(self):
+        """Head change h (m) at the local vertices (owned and ghost), at the current time."""
+        return self.h_local.copy()
+
+    def cell_values(self, t, cell_material=None, centroids=None):
+        """Pore-pressure change dp = rho_w g h (Pa) per local cell at time t (advancing to t if needed);
+        h is the cell average of the P1 head. Same interface as MaterialDrawdown.cell_values."""
+        self.advance_to(t)
+        return self.rho_g * self.h_local[self.mesh.cells].mean(axis=1)
+
+    def destroy(self):
+        for obj in [self.ksp, self.A, self.M, self.J, self.h, self.b, *self.well_loads, self.section, self.dm]:
+            obj.destroy()
+        self.well_loads = []
