@@ -113,6 +113,11 @@ SPECS = [
     _s("pfault_contact_opening_tol", "quantity", -1.0, "m", "interpenetration that closes an open face "
        "(default 1e-12 of the mesh size)"),
     _s("pfault_contact_slip_tol", "quantity", 1e-3, "", "relative hysteresis of the stick/slip switch"),
+    _s("pfault_contact_slip_regularization", "quantity", 0.0, "", "slip-direction regularisation eps as a "
+       "fraction of the face size: s = dg/sqrt(|dg|^2 + eps^2) (0: exact Coulomb; small values help faces "
+       "whose slip is kinematically blocked)"),
+    _s("pfault_contact_monitor", "bool", False, "", "print one line per active-set update (Newton its, "
+       "residual, state transitions)"),
     _s("pfault_contact_active_set_tol", "quantity", 0.0, "", "fraction of the fault area allowed to change "
        "state in the last active-set update of a settled step"),
     # solver

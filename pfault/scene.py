@@ -247,4 +247,6 @@ def read_contact_options(reader, materials, serial_extent):
             "traction_tol": ttol if ttol >= 0 else 1e-8 * emax,
             "opening_tol": otol if otol >= 0 else 1e-12 * serial_extent,
             "slip_tol": reader.get("pfault_contact_slip_tol"),
-            "active_set_tol": reader.get("pfault_contact_active_set_tol")}
+            "active_set_tol": reader.get("pfault_contact_active_set_tol"),
+            "monitor": reader.get("pfault_contact_monitor"),
+            "slip_regularization": reader.get("pfault_contact_slip_regularization")}

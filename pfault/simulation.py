@@ -57,6 +57,14 @@ class Simulation:
         self.material_names, self.surface_names = names
         self.materials = scn.read_materials(reader, self.material_names)
         self.drawdown = scn.read_drawdown(reader, self.material_names, s.water_density, s.gravity)
+        self.flow_settings = None
+        if reader.get("pfault_flow"):
+            from .solver.flow import read_flow_settings
+            if self.drawdown.active:
+                raise InputError("-pfault_flow: the pore pressure comes from the flow model; remove the "
+                                 "per-material head_drawdown/pressure_change tables")
+            self.flow_settings = read_flow_settings(reader, self.material_names, self.materials, self.surface_names,
+                                                    s.water_density, s.gravity)
         self.fault_settings = scn.read_faults(reader, self.surface_names)
         fault_names = [f.name for f in self.fault_settings]
         self.boundaries = scn.read_boundaries(reader, self.surface_names, exclude=fault_names)
@@ -66,6 +74,9 @@ class Simulation:
 
         def arrays():
             out = scn.boundary_arrays(serial, self.boundaries, s.ground_surface)
+            if self.flow_settings is not None:
+                from .solver.flow import FIXED_HEAD_BIT, fixed_head_vertices
+                out[0][:] |= FIXED_HEAD_BIT * fixed_head_vertices(serial, self.flow_settings.fixed_head_surfaces)
             split = pairs = None
             if fault_names:
                 from .mesh.fault import split_faults
@@ -101,6 +112,14 @@ class Simulation:
         else:
             self.dofmap = fields.build(self.mesh)
         self.asm = ElasticAssembler(self.mesh, self.dofmap, self.materials)
+        self.flow = None
+        if self.flow_settings is not None:
+            from .solver.flow import FIXED_HEAD_BIT, GroundwaterFlow
+            fs, mat = self.flow_settings, self.mesh.cell_material
+            self.flow = GroundwaterFlow(self.mesh, fs.conductivity[mat], fs.storage[mat], wells=fs.wells,
+                                        fixed_head=(self.mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0,
+                                        substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity)
+            self.drawdown = self.flow
         if self.fault_settings:
             from .solver.problem import FaultProblem
             self.problem = FaultProblem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s,
@@ -109,13 +128,18 @@ class Simulation:
         else:
             self.problem = ElasticProblem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s)
         self.snes = self.problem.create_snes()
-        check_unused_petsc_options(PETSc, reader)
         stage.pop()
         self.wall["setup"] = time.perf_counter() - t0
 
     # ------------------------------------------------------------------------------------------
     def _solve(self, t):
-        return self.problem.solve_step(self.snes, t)
+        rec = self.problem.solve_step(self.snes, t)
+        if self.flow is not None and self.flow.history:
+            rec["flow_ksp_its"] = int(self.flow.history[-1].get("ksp_its", 0))
+            from mpi4py import MPI
+            h = self.flow.vertex_head()
+            rec["max_drawdown_m"] = self.comm.tompi4py().allreduce(float(np.max(-h, initial=0.0)), op=MPI.MAX)
+        return rec
 
     def _surface_figures(self):
         """Maximum subsidence and horizontal displacement on the ground surface (relative to the initial state)."""
@@ -148,22 +172,30 @@ class Simulation:
         tets = np.where(self.split.cell_side == 1, copy[tets], tets)
         return np.concatenate([pts, pts[sv]]), tets
 
-    def _output(self, step, t, u_rel_local):
+    def _output(self, step, t, u_rel_local, initial=False):
         p = self.problem
         both = np.concatenate([u_rel_local[self.dofmap.vertex_dofs(0)], u_rel_local[self.dofmap.vertex_dofs(1)]],
                               axis=1)
         pts = distributed.gather_vertex_values(self.mesh, both)
-        u_total = p.local_array(p.u)
+        u_total = p.local_array(p.u_ref if initial else p.u)
         sig = p.cell_total_stress(u_total, t).reshape(-1, 9)
         dp = p.cell_dp(t) if p.drawdown.active else np.zeros(len(sig))
         cells = distributed.gather_cell_values(self.mesh, np.column_stack([dp, sig]))
         faults = self._fault_fields(u_total, u_rel_local) if self.fault_settings else None
+        head = None
+        if self.flow is not None:
+            head = distributed.gather_vertex_values(self.mesh, self.flow.vertex_head().reshape(-1, 1))
         if self.comm.rank == 0:
             u = pts[:, :3]
             if self.split is not None:
                 u = np.concatenate([u, pts[self.split.split_vertices, 3:]])
-            self.writer.write_step(t, {"displacement": u},
-                                   {"pore_pressure_change": cells[:, 0], "stress": cells[:, 1:10]})
+            point_data = {"displacement": u}
+            if head is not None:
+                hh = head[:, 0]
+                if self.split is not None:
+                    hh = np.concatenate([hh, hh[self.split.split_vertices]])
+                point_data["head_change"] = hh
+            self.writer.write_step(t, point_data, {"pore_pressure_change": cells[:, 0], "stress": cells[:, 1:10]})
             if faults is not None:
                 self.writer.write_fault_step(t, faults)
 
@@ -208,26 +240,16 @@ class Simulation:
             self.wall["solve"] += rec["wall_s"]
             steps.append(rec)
             self._progress(0, rec)
+            self._open_output()
             if not rec["converged"]:
                 return self._finish(steps, converged=False)
-        t0 = time.perf_counter()
-        out_stage.push()
-        if self.comm.rank == 0:
-            from .io.output import RunWriter
-            points, tets = self._output_mesh()
-            self.writer = RunWriter(s.output_dir, points, tets, self.serial.cell_material, self.material_names,
-                                    fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
-                                                                                self.split.fault_id))
-            self.writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
-        self._output(0, 0.0, np.zeros(self.dofmap.n_local))
-        out_stage.pop()
-        self.wall["output"] += time.perf_counter() - t0
         converged = True
         for step in range(1, s.time_steps + 1):
             t = times[step]
             solve_stage.push()
             rec = self._solve(t)
             solve_stage.pop()
+            self._open_output()
             self.wall["solve"] += rec["wall_s"]
             sub, hor, u_rel = self._surface_figures()
             rec["max_subsidence_m"], rec["max_horizontal_displacement_m"] = sub, hor
@@ -245,6 +267,28 @@ class Simulation:
                 converged = False
                 break
         return self._finish(steps, converged)
+
+    def _open_output(self):
+        """After the first solve (every solver option has been read by then): reject unused options, then
+        create the output directory and write the initial state. Nothing is written before this."""
+        if hasattr(self, "writer_ready"):
+            return
+        check_unused_petsc_options(PETSc, self.reader)
+        self.writer_ready = True
+        t0 = time.perf_counter()
+        stage = PETSc.Log.Stage("Output")
+        stage.push()
+        if self.comm.rank == 0:
+            from .io.output import RunWriter
+            points, tets = self._output_mesh()
+            self.writer = RunWriter(self.settings.output_dir, points, tets, self.serial.cell_material,
+                                    self.material_names,
+                                    fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
+                                                                                self.split.fault_id))
+            self.writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+        self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
+        stage.pop()
+        self.wall["output"] += time.perf_counter() - t0
 
     def _progress(self, step, rec):
         extra = ""
@@ -290,6 +334,8 @@ class Simulation:
             self.snes.destroy()
         if hasattr(self, "problem"):
             self.problem.destroy()
+        if getattr(self, "flow", None) is not None:
+            self.flow.destroy()
         if hasattr(self, "mesh"):
             if self.mesh.migration is not None:
                 self.mesh.migration.destroy()

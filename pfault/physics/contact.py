@@ -37,8 +37,12 @@ def coulomb_limit(t_n, cohesion, tan_phi):
     return np.maximum(cohesion - tan_phi * t_n, 0.0)
 
 
-def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_tol):
-    """Residual rows (nf,3) and their derivatives d r/d g_loc (nf,3,3), d r/d t (nf,3,3)."""
+def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_tol, slip_reg=None):
+    """Residual rows (nf,3) and their derivatives d r/d g_loc (nf,3,3), d r/d t (nf,3,3).
+
+    slip_reg (nf,) > 0 regularises the slip direction, s = dg_T / sqrt(|dg_T|^2 + eps^2): the slip law
+    stays differentiable where a face's slip increment is kinematically blocked (|dg_T| -> 0), at the
+    price of a traction below the limit for slips much smaller than eps."""
     nf = len(area)
     r = np.zeros((nf, 3))
     dg = np.zeros((nf, 3, 3))
@@ -62,13 +66,16 @@ def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_to
         # slip direction from the slip increment
         j = i[moving]
         if len(j):
-            s = d[moving] / dn[moving, None]
+            eps2 = np.zeros(len(j)) if slip_reg is None else slip_reg[j] ** 2
+            dm = d[moving]
+            nrm = np.sqrt(dn[moving] ** 2 + eps2)
+            s = dm / nrm[:, None]
             tm = tau[moving]
             r[j, 1:] = A[j, None] * (t[j, 1:] - tm[:, None] * s)
             dt[j, 1, 1] = dt[j, 2, 2] = A[j]
             dt[j, 1:, 0] = -A[j, None] * dtau_dtn[moving, None] * s
-            proj = np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)
-            dg[j, 1:, 1:] = -(A[j] * tm / dn[moving])[:, None, None] * proj
+            ds = (np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)) / nrm[:, None, None]
+            dg[j, 1:, 1:] = -(A[j] * tm)[:, None, None] * ds
         # no increment yet: slip along the traction
         j = i[~moving]
         if len(j):
@@ -90,12 +97,15 @@ def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_to
     return r, dg, dt
 
 
-def update_states(state, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol, slip_tol_ratio):
+def update_states(state, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol, slip_tol_ratio,
+                  slip_to_stick=True):
     """Next active set from the converged solution of the current one (with hysteresis).
 
     open -> stick when the faces interpenetrate (g_N < -opening_tol);
     closed -> open when the normal traction is tensile (t_N > traction_tol);
-    stick -> slip when |t_T| > tau_L (1 + slip_tol_ratio); slip -> stick when |t_T| < tau_L (1 - slip_tol_ratio).
+    stick -> slip when |t_T| > tau_L (1 + slip_tol_ratio); slip -> stick when |t_T| < tau_L (1 - slip_tol_ratio)
+    (not with a regularised slip law, where a slipping face whose increment is blocked already behaves as
+    stuck; faces return to stick at the start of the next step).
     """
     new = state.copy()
     opn = state == OPEN
@@ -107,8 +117,22 @@ def update_states(state, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol,
     tau = coulomb_limit(t[:, 0], cohesion, tan_phi)
     tt = np.linalg.norm(t[:, 1:], axis=1)
     new[rest & (state == STICK) & (tt > tau * (1 + slip_tol_ratio) + traction_tol * 1e-3)] = SLIP
-    new[rest & (state == SLIP) & (tt < tau * (1 - slip_tol_ratio))] = STICK
+    if slip_to_stick:
+        new[rest & (state == SLIP) & (tt < tau * (1 - slip_tol_ratio))] = STICK
     return new
+
+
+def violation(state, new, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol):
+    """How strongly each face asks for its change of state (larger first); 0 where nothing changes."""
+    tau = coulomb_limit(t[:, 0], cohesion, tan_phi)
+    tt = np.linalg.norm(t[:, 1:], axis=1)
+    ref = np.maximum(tau, traction_tol)
+    v = np.zeros(len(state))
+    v = np.where((state != OPEN) & (new == OPEN), t[:, 0] / ref, v)
+    v = np.where((state == STICK) & (new == SLIP), (tt - tau) / ref, v)
+    v = np.where((state == SLIP) & (new == STICK), (tau - tt) / ref, v)
+    v = np.where((state == OPEN) & (new == STICK), -g_loc[:, 0] / max(opening_tol, 1e-300), v)
+    return np.where(new != state, np.maximum(v, 1e-300), 0.0)
 
 
 def penalty_traction(g_loc, g_prev_loc, t_prev, kn, kt, cohesion, tan_phi):
@@ -120,7 +144,7 @@ def penalty_traction(g_loc, g_prev_loc, t_prev, kn, kt, cohesion, tan_phi):
     t = np.zeros((nf, 3))
     d = np.zeros((nf, 3, 3))
     state = np.full(nf, OPEN)
-    closed = g_loc[:, 0] < 0
+    closed = g_loc[:, 0] <= 0
     t[closed, 0] = kn[closed] * g_loc[closed, 0]
     d[closed, 0, 0] = kn[closed]
     trial = t_prev[:, 1:] + kt[:, None] * (g_loc[:, 1:] - g_prev_loc[:, 1:])
@@ -140,3 +164,10 @@ def penalty_traction(g_loc, g_prev_loc, t_prev, kn, kt, cohesion, tan_phi):
         d[slip, 1:, 0] = (dtau_dtn[slip] * kn[slip])[:, None] * s
         state[slip] = SLIP
     return t, d, state
+
+
+def transition_counts(old, new):
+    """3x3 table: counts[i, j] faces going from state i to state j."""
+    c = np.zeros((3, 3), dtype=np.int64)
+    np.add.at(c, (old, new), 1)
+    return c

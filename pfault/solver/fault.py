@@ -143,7 +143,8 @@ class FaultSystem:
         kt = np.array([s.penalty_tangential for s in settings])[self.fault]
         self.kn = np.where(kn > 0, kn, kauto)
         self.kt = np.where(kt > 0, kt, kauto)
-        self.slide_tol = 1e-12 * np.maximum(h, 1.0)
+        self.slide_tol = 1e-10 * h
+        self.slip_reg = np.zeros(nf)
         # state
         self.state = np.full(nf, ct.STICK)
         self.g_prev = np.zeros((nf, 3))     # local jump at the start of the step
@@ -200,8 +201,18 @@ class FaultSystem:
         self.g_prev = gl
         self.t_prev = t_new
         self.state = np.where(self.state == ct.SLIP, ct.STICK, self.state)
+        self.visited = (1 << self.state).astype(np.int64)   # states each face has held in this step
+        self.frozen = np.zeros(self.nf, bool)                # faces that chattered: kept as they are
         self._sync_state()
         self.t_prev_all = self.gather_faces(self.t_prev)
+
+    def initial_tractions(self, sigma0):
+        """Multipliers of the initial state: the prestress of the two adjacent cells, projected on the faces
+        (local frame). ``sigma0`` is per local cell (nc,3,3); the plus cell's stress is not local, so the
+        minus cell's is used (the prestress is continuous across a fault in a layered initial state)."""
+        s = sigma0[self.cell]
+        tg = np.einsum("nij,nj->ni", s, self.normal)
+        return np.einsum("nij,nj->ni", self.R, tg)
 
     def insert_pattern(self, J):
         """Insert explicit zeros where the interface blocks go (for exact preallocation)."""
@@ -269,16 +280,12 @@ class FaultSystem:
             colmask_a = np.arange(3)[None, :] < na[:, None]
             Saa = -S * rowmask[:, :, None] * colmask_a[:, None, :]
             Sab = S * rowmask[:, :, None] * colmask[:, None, :]
-            # normal row acts on total tractions, tangential rows on the step increments
-            ta = np.where(np.arange(3)[None, :] == 0, t_all[fa], dt_all[fa])
-            tb = np.where(np.arange(3)[None, :] == 0, t_all[fb], dt_all[fb])
-            rn = np.einsum("nj,nj->n", Saa[:, 0], t_all[fa]) + np.einsum("nj,nj->n", Sab[:, 0], t_all[fb])
-            rt = np.einsum("nij,nj->ni", Saa[:, 1:], dt_all[fa]) + np.einsum("nij,nj->ni", Sab[:, 1:], dt_all[fb])
-            contrib = np.column_stack([rn, rt])
+            # the stabilisation acts on the traction increments of the step: a traction field that
+            # varies smoothly along the fault (geostatic gradients) is not perturbed by it
+            contrib = np.einsum("nij,nj->ni", Saa, dt_all[fa]) + np.einsum("nij,nj->ni", Sab, dt_all[fb])
             np.add.at(r, pos[fa], contrib)
             blocks.append((self.all_g_lm[fa], self.all_g_lm[fa], Saa))
             blocks.append((self.all_g_lm[fa], self.all_g_lm[fb], Sab))
-            del ta, tb
         return r, blocks
 
     def residual(self, x_loc, t_all, out):
@@ -298,7 +305,8 @@ class FaultSystem:
         out += np.bincount(self.u_dofs.ravel(), weights=fu.ravel(), minlength=len(out))
         if self.has_lagrange and np.any(lag):
             r, _, _ = ct.lagrange_rows(self.state[lag], self.area[lag], gl[lag], self.g_prev[lag], t[lag],
-                                       self.cohesion[lag], self.tan_phi[lag], self.slide_tol[lag])
+                                       self.cohesion[lag], self.tan_phi[lag], self.slide_tol[lag],
+                                       self.slip_reg[lag])
             rs, _ = self._stab_rows(t_all)
             rr = np.zeros((self.nf, 3))
             rr[lag] = r
@@ -322,7 +330,8 @@ class FaultSystem:
             blk = blk.reshape(len(idx), 18, 3) * self.u_mask[idx][:, :, None]
             J.setValuesRCV(self.g_u[idx], self.g_lm[idx], blk.reshape(len(idx), 54).copy(), addv=ADD)
             r, dg, dt = ct.lagrange_rows(self.state[idx], self.area[idx], gl[idx], self.g_prev[idx], t,
-                                         self.cohesion[idx], self.tan_phi[idx], self.slide_tol[idx])
+                                         self.cohesion[idx], self.tan_phi[idx], self.slide_tol[idx],
+                                         self.slip_reg[idx])
             # d r / d u = dr/dg_loc R (1/3) sign
             drdg = np.einsum("nij,njk->nik", dg, self.R[idx]) / 3.0                           # (n,3,3)
             blk = sign[None, None, :, None] * drdg[:, :, None, :]                              # (n,3,6,3)
@@ -344,22 +353,48 @@ class FaultSystem:
             J.setValuesRCV(self.g_u[idx], self.g_u[idx], blk.reshape(len(idx), 324).copy(), addv=ADD)
 
     # -- active set ---------------------------------------------------------------------------
-    def update_active_set(self, x_loc, traction_tol, opening_tol, slip_tol_ratio):
-        """New stick/slip/open states of Lagrange faces; returns the changed area (all ranks)."""
-        lag = self.lagrange
-        changed = 0.0
-        if np.any(lag):
-            _, gl = self.jumps(x_loc)
-            t = self.tractions(x_loc)
-            new = ct.update_states(self.state[lag], t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag],
-                                   traction_tol, opening_tol, slip_tol_ratio)
-            diff = new != self.state[lag]
-            changed = float(self.area[lag][diff].sum())
-            st = self.state.copy()
-            st[lag] = new
-            self.state = st
+    def save_state(self):
+        self._saved = (self.state.copy(), self.visited.copy(), self.frozen.copy())
+
+    def restore_state(self):
+        self.state, self.visited, self.frozen = (a.copy() for a in self._saved)
+        self._sync_state()
+
+    def update_active_set(self, x_loc, traction_tol, opening_tol, slip_tol_ratio, fraction=1.0):
+        """New stick/slip/open states of Lagrange faces; returns the changed area (all ranks).
+
+        Rules in pfault.physics.contact.update_states. A face returning to a state it already held in this
+        step is frozen in it (anti-chatter). With fraction < 1 only that share of the faces asking for a
+        change (at least one: those asking most strongly, ranked over all ranks) changes: the bounded
+        update after a configuration that Newton could not solve."""
+        lag = np.nonzero(self.lagrange)[0]
+        old = self.state[lag]
+        _, gl = self.jumps(x_loc)
+        t = self.tractions(x_loc)
+        new = ct.update_states(old, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
+                               opening_tol, slip_tol_ratio, slip_to_stick=not np.any(self.slip_reg > 0))
+        new = np.where(self.frozen[lag], old, new)
+        if fraction < 1.0:
+            v = ct.violation(old, new, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
+                             opening_tol)
+            allv = np.concatenate(self.mpi.allgather(v[v > 0]))
+            keep = max(1, int(np.floor(fraction * len(allv))))
+            if len(allv) > keep:
+                threshold = np.sort(allv)[::-1][keep - 1]
+                new = np.where(v >= threshold, new, old)
+        back = (new != old) & (((self.visited[lag] >> new) & 1) == 1)
+        self.frozen[lag] |= back
+        self.visited[lag] |= 1 << new
+        self.last_transitions = self.mpi.allreduce(ct.transition_counts(old, new), op=MPI.SUM)
+        changed = float(self.area[lag][new != old].sum())
+        st = self.state.copy()
+        st[lag] = new
+        self.state = st
         self._sync_state()
         return self.mpi.allreduce(changed, op=MPI.SUM)
+
+    def frozen_count(self):
+        return int(self.mpi.allreduce(int(np.count_nonzero(getattr(self, "frozen", np.zeros(0, bool)))), op=MPI.SUM))
 
     def counts_by_state(self, x_loc):
         st = self.current_states(x_loc)

@@ -240,6 +240,7 @@ class FaultProblem(ElasticProblem):
         bc_local = self._constrained_local()
         self.faults = FaultSystem(self.mesh, self.dofmap, self.fault_settings, fault_id, pairs, pair_S, materials,
                                   bc_local, self.dm.getLGMap())
+        self.faults.slip_reg = self.contact_opts.get("slip_regularization", 0.0) * self.faults.h
         self.asm.add_stiffness(K0)
         self.faults.insert_pattern(K0)
         K0.assemble()
@@ -298,6 +299,20 @@ class FaultProblem(ElasticProblem):
         ksp.setUp()
         return snes
 
+    def geostatic_prestress(self, snes):
+        sigma0 = super().geostatic_prestress(snes)
+        # start the initial equilibrium from the prestress tractions on the faults
+        f = self.faults
+        if f.has_lagrange and f.nf:
+            loc = self.local_array(self.u)
+            t0 = f.initial_tractions(sigma0)
+            lag = np.nonzero(f.lagrange)[0]
+            loc[f.lm_dofs[lag]] = t0[lag]
+            self._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=self.u)
+        else:
+            self._to_global(self.local_array(self.u), PETSc.InsertMode.INSERT_VALUES, out=self.u)
+        return sigma0
+
     def _solve_gravity(self, snes, ug):
         """Elastic gravity state with every fault face glued (stick, zero previous jump)."""
         self.faults.begin_step(np.zeros(self.dofmap.n_local))
@@ -322,26 +337,54 @@ class FaultProblem(ElasticProblem):
         converged = True
         reason = 0
         total_area = self.comm.tompi4py().allreduce(float(self.faults.area.sum()))
+        x_conv = self.u.duplicate()
+        self.u.copy(x_conv)
+        self.faults.save_state()
+        fraction = 1.0
         for it in range(1, o["max_active_set_its"] + 1):
+            snes.setConvergenceHistory(reset=True)
             snes.solve(None, self.u)
             reason = snes.getConvergedReason()
-            newton += snes.getIterationNumber()
+            its = snes.getIterationNumber()
+            newton += its
             ksp += snes.getLinearSolveIterations()
-            history.append([float(v) for v in snes.getConvergenceHistory()[0]])
-            if reason <= 0:
+            history.append([float(v) for v in snes.getConvergenceHistory()[0][:its + 1]])
+            if reason > 0:
+                self.u.copy(x_conv)
+                self.faults.save_state()
+                fraction = 1.0
+            elif reason in (-5, -6):            # DIVERGED_MAX_IT, DIVERGED_LINE_SEARCH
+                # Newton could not solve this configuration: go back to the last solved one and change
+                # fewer faces, those that ask for it most strongly (bounded configuration update)
+                x_conv.copy(self.u)
+                self.faults.restore_state()
+                fraction *= 0.25
+            else:
                 converged = False
                 break
             x_loc = self.local_array(self.u)
-            changed = self.faults.update_active_set(x_loc, o["traction_tol"], o["opening_tol"], o["slip_tol"])
-            if changed <= o["active_set_tol"] * total_area:
+            changed = self.faults.update_active_set(x_loc, o["traction_tol"], o["opening_tol"], o["slip_tol"],
+                                                    fraction)
+            if o.get("monitor"):
+                tr = self.faults.last_transitions
+                PETSc.Sys.Print(f"  active set {it:2d}: newton {its:2d} ({'converged' if reason > 0 else 'failed'}, "
+                                f"|F| {history[-1][-1]:.3e})  stick->slip {tr[0, 1]}  slip->stick {tr[1, 0]}  "
+                                f"->open {tr[0, 2] + tr[1, 2]}  open->stick {tr[2, 0]}"
+                                + ("" if fraction == 1.0 else f"  (bounded update: {fraction:g})"))
+            if reason > 0 and changed <= o["active_set_tol"] * total_area:
                 settled = True
                 break
+            if reason <= 0 and changed == 0.0:
+                converged = False
+                break
+        x_conv.destroy()
         x_loc = self.local_array(self.u)
         counts = self.faults.counts_by_state(x_loc)
         rec = {"time_s": float(t), "newton_its": int(newton), "ksp_its": int(ksp),
                "wall_s": _time.perf_counter() - t0, "active_set_its": it, "active_set_settled": bool(settled),
                "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
         rec.update(counts)
+        rec["frozen_faces"] = self.faults.frozen_count()
         if converged and not settled:
             rec["reason"] = "active set did not settle"
         return rec

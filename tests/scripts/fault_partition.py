@@ -1,0 +1,27 @@
+#!/usr/bin/env python
+"""Fault faces owned by each rank for the two-blocks scene (extra options from the command line).
+
+    mpirun -n 2 python tests/scripts/fault_partition.py -pfault_box_cells 8,4,4
+
+Prints JSON {"ranks": N, "faces_per_rank": [...], "fault_faces": total}. A face belongs to the rank that
+owns its minus cell (pfault.solver.fault.FaultSystem); the 2-rank fault tests need faces on every rank.
+"""
+import json
+import sys
+
+import petsc4py
+
+SCENE = "config/two_blocks.opts"
+petsc4py.init([sys.argv[0], "-options_file", SCENE] + sys.argv[1:])
+from petsc4py import PETSc  # noqa: E402
+
+from pfault.simulation import Simulation  # noqa: E402
+
+sim = Simulation(SCENE, sys.argv)
+sim.setup()
+faults = sim.problem.faults
+counts = [int(c) for c in faults.mpi.allgather(faults.nf)]
+out = {"ranks": PETSc.COMM_WORLD.size, "faces_per_rank": counts, "fault_faces": int(faults.nf_total)}
+sim.destroy()
+if PETSc.COMM_WORLD.rank == 0:
+    print(json.dumps(out))

@@ -1,0 +1,155 @@
+#!/usr/bin/env python
+"""Taylor test of the full fault system F(x) (elasticity + interface terms) against its Jacobian J(x).
+
+    mpirun -n 2 python tests/scripts/jacobian_check.py [-pfault_box_cells 4,4,4 ...]
+
+Sets up the two-blocks scene in-process (Lagrange multipliers, then penalty), places the state x in a chosen
+contact configuration and measures, for h = 1e-2, 1e-3, 1e-4 and a direction v that vanishes on Dirichlet rows,
+
+    e1(h) = ||F(x + h v) - F(x)||          (first order: ~ h)
+    e2(h) = ||F(x + h v) - F(x) - h J v||  (Taylor remainder: ~ h^2 where F is nonlinear, round-off where affine)
+
+Cases: Lagrange faces forced to stick, slip (with a slip increment, and before any increment: the slip direction
+then follows the traction), open, and a mix of the three (face id mod 3); penalty faces in the stick, slip and
+open branches of the return map (selected by the jump; the branch of every face is checked not to change
+between x and x + h v). Prints one JSON line {case: {e1, e2, order1, order2, states, ...}}.
+"""
+import json
+import sys
+
+import petsc4py
+
+SCENE = "config/two_blocks.opts"
+petsc4py.init([sys.argv[0], "-options_file", SCENE] + sys.argv[1:])
+import numpy as np  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+from petsc4py import PETSc  # noqa: E402
+
+from pfault.physics import contact as ct  # noqa: E402
+from pfault.simulation import Simulation  # noqa: E402
+
+H = (1e-2, 1e-3, 1e-4)
+COMM = PETSc.COMM_WORLD
+
+
+def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noise=1e5):
+    """x: small random displacement + a uniform jump `offset` (global) of the plus side of the fault, random
+    compressive multipliers; v: random, zero on Dirichlet rows."""
+    p, f, dm = sim.problem, sim.problem.faults, sim.dofmap
+    x = p.u.duplicate()
+    v = p.u.duplicate()
+    rstart, rend = x.getOwnershipRange()
+    n = rend - rstart
+    lm = (f.g_lm[f.lagrange].ravel() - rstart) if f.nf else np.zeros(0, np.int64)
+    xa = rng.normal(size=n) * u_noise
+    xa[lm] = (np.asarray(t_mean)[None, :] + t_noise * rng.normal(size=(len(lm) // 3, 3))).ravel()
+    x.setArray(xa)
+    # plus-side dofs of every split vertex (owned or ghost, the same value on every rank): add the offset
+    loc = p.local_array(x)
+    split = dm.vert_sides > 1
+    plus = dm.vertex_dofs(1)[split]
+    loc[plus] += np.asarray(offset)[None, :]
+    p._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=x)
+    va = rng.normal(size=n) * 1e-3
+    va[lm] = rng.normal(size=len(lm)) * 1e5
+    va[p.bc_rows - rstart] = 0.0
+    v.setArray(va)
+    return x, v
+
+
+def taylor(sim, x, v, check_states=False):
+    p = sim.problem
+    F0, Fh, Jv, xh = x.duplicate(), x.duplicate(), x.duplicate(), x.duplicate()
+    p.residual(sim.snes, x, F0)
+    p.jacobian(sim.snes, x, p.J, p.J)
+    p.J.mult(v, Jv)
+    states0 = p.faults.current_states(p.local_array(x))
+    e1, e2, same = [], [], True
+    for h in H:
+        x.copy(xh)
+        xh.axpy(h, v)
+        p.residual(sim.snes, xh, Fh)
+        Fh.axpy(-1.0, F0)
+        e1.append(Fh.norm())
+        Fh.axpy(-h, Jv)
+        e2.append(Fh.norm())
+        if check_states:
+            same &= bool(np.array_equal(p.faults.current_states(p.local_array(xh)), states0))
+    same = bool(COMM.tompi4py().allreduce(same, op=MPI.LAND))
+    counts = np.bincount(states0, minlength=3) if len(states0) else np.zeros(3, np.int64)
+    counts = COMM.tompi4py().allreduce(counts)
+    out = {"h": list(H), "e1": e1, "e2": e2, "F_norm": F0.norm(), "Jv_norm": Jv.norm(),
+           "order1": [float(np.log10(a / b)) for a, b in zip(e1, e1[1:])],
+           "order2": [float(np.log10(a / b)) for a, b in zip(e2, e2[1:])],
+           "remainder_ratio": [float(b / a) for a, b in zip(e1, e2)],
+           "states": {name: int(c) for name, c in zip(ct.STATE_NAMES, counts)}, "states_unchanged": same}
+    for vec in (F0, Fh, Jv, xh):
+        vec.destroy()
+    return out
+
+
+def set_history(f, rng, g_prev, t_prev):
+    """Start-of-step jump and traction (local frame) of the owned faces; gathered copy for the stabilisation."""
+    f.g_prev = np.asarray(g_prev)[None, :] + 1e-4 * rng.normal(size=(f.nf, 3))
+    f.t_prev = np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.nf, 3))
+    f.t_prev_all = f.gather_faces(f.t_prev)
+
+
+def lagrange_cases(results):
+    sim = Simulation(SCENE, sys.argv)
+    sim.setup()
+    p, f = sim.problem, sim.problem.faults
+    p.set_load(1.0)
+    rng = np.random.default_rng(1234 + COMM.rank)
+    counts = COMM.tompi4py().allgather(f.nf)
+    results["faces_per_rank"] = [int(c) for c in counts]
+    # jump offset (normal, 0, dip) in the local frame (n = +x: local = global components)
+    set_history(f, rng, g_prev=(0.0, 1e-3, 2e-3), t_prev=(-9e5, 1e4, 5e4))
+    x, v = make_vectors(sim, offset=(0.0, 0.0, 2e-2), rng=rng)
+    tol = f.slide_tol.copy()
+    for name, state in (("stick", ct.STICK), ("slip", ct.SLIP), ("open", ct.OPEN), ("mixed", None),
+                        ("slip_start", ct.SLIP)):
+        if state is None:
+            f.state[:] = f.face % 3         # serial face id: the same configuration at any rank count
+        else:
+            f.state[:] = state
+        # before the first slip increment the slip direction follows the traction: make every increment
+        # smaller than the sliding tolerance
+        f.slide_tol = np.full_like(tol, 1e3) if name == "slip_start" else tol
+        f._sync_state()
+        results["lagrange_" + name] = taylor(sim, x, v)
+    f.slide_tol = tol
+    x.destroy()
+    v.destroy()
+    sim.destroy()
+
+
+def penalty_cases(results):
+    opts = PETSc.Options()
+    opts.setValue("pfault_fault_fault_method", "penalty")
+    sim = Simulation(SCENE, sys.argv)
+    sim.setup()
+    p, f = sim.problem, sim.problem.faults
+    p.set_load(1.0)
+    rng = np.random.default_rng(4321 + COMM.rank)
+    k = float(np.mean(f.kn)) if f.nf else 0.0
+    results["penalty_stiffness"] = COMM.tompi4py().allgather(k)
+    # t_N = k g_N, tau_L = tan(phi) |t_N|; trial shear = t_T^n + k (g_T - g_T^n)
+    for name, offset, g_prev, t_prev in (
+            ("stick", (-2e-2, 0.0, 1e-3), (0.0, 0.0, 0.0), (-5e5, 0.0, 1e4)),
+            ("slip", (-1e-2, 0.0, 8e-2), (0.0, 1e-3, 2e-3), (-5e5, 1e4, 5e4)),
+            ("open", (1e-2, 0.0, 3e-2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))):
+        set_history(f, rng, g_prev, t_prev)
+        x, v = make_vectors(sim, offset=offset, rng=rng)
+        results["penalty_" + name] = taylor(sim, x, v, check_states=True)
+        x.destroy()
+        v.destroy()
+    sim.destroy()
+
+
+if __name__ == "__main__":
+    res = {"ranks": COMM.size}
+    lagrange_cases(res)
+    penalty_cases(res)
+    if COMM.rank == 0:
+        print(json.dumps(res))
