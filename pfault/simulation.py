@@ -178,8 +178,8 @@ class Simulation:
                               axis=1)
         pts = distributed.gather_vertex_values(self.mesh, both)
         u_total = p.local_array(p.u_ref if initial else p.u)
-        sig = p.cell_total_stress(u_total, t).reshape(-1, 9)
-        dp = p.cell_dp(t) if p.drawdown.active else np.zeros(len(sig))
+        dp = p.cell_dp(t) if (p.drawdown.active and not initial) else np.zeros(len(self.mesh.cells))
+        sig = p.cell_total_stress(u_total, dp).reshape(-1, 9)
         cells = distributed.gather_cell_values(self.mesh, np.column_stack([dp, sig]))
         faults = self._fault_fields(u_total, u_rel_local) if self.fault_settings else None
         head = None
@@ -232,17 +232,15 @@ class Simulation:
             solve_stage.push()
             t0 = time.perf_counter()
             p.geostatic_prestress(self.snes)
-            rec = self._solve(0.0)
-            rec["initial"] = True
-            rec["wall_s"] = time.perf_counter() - t0
             p.u.copy(p.u_ref)
+            rec = {"time_s": 0.0, "newton_its": 0, "ksp_its": 0, "wall_s": time.perf_counter() - t0,
+                   "converged": True, "initial": True}
+            if self.fault_settings:
+                rec.update(p.faults.counts_by_state(p.local_array(p.u)))
             solve_stage.pop()
             self.wall["solve"] += rec["wall_s"]
             steps.append(rec)
             self._progress(0, rec)
-            self._open_output()
-            if not rec["converged"]:
-                return self._finish(steps, converged=False)
         converged = True
         for step in range(1, s.time_steps + 1):
             t = times[step]

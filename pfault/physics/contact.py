@@ -135,17 +135,20 @@ def violation(state, new, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol
     return np.where(new != state, np.maximum(v, 1e-300), 0.0)
 
 
-def penalty_traction(g_loc, g_prev_loc, t_prev, kn, kt, cohesion, tan_phi):
+def penalty_traction(g_loc, g_prev_loc, t_prev, kn, kt, cohesion, tan_phi, t0_n=None):
     """Penalty contact: traction (nf,3), derivative dt/dg_loc (nf,3,3) and state.
 
-    t_N = kn g_N in contact (g_N < 0), 0 when open; tangential return map from t_T^n + kt dg_T.
+    t_N = t0_N + kn g_N while in contact (t_N <= 0), 0 when open; tangential return map from t_T^n + kt dg_T.
+    t0_N is the initial normal traction (prestress), 0 by default.
     """
     nf = len(g_loc)
     t = np.zeros((nf, 3))
     d = np.zeros((nf, 3, 3))
     state = np.full(nf, OPEN)
-    closed = g_loc[:, 0] <= 0
-    t[closed, 0] = kn[closed] * g_loc[closed, 0]
+    t0n = np.zeros(nf) if t0_n is None else t0_n
+    tn_trial = t0n + kn * g_loc[:, 0]
+    closed = tn_trial <= 0
+    t[closed, 0] = tn_trial[closed]
     d[closed, 0, 0] = kn[closed]
     trial = t_prev[:, 1:] + kt[:, None] * (g_loc[:, 1:] - g_prev_loc[:, 1:])
     tau = coulomb_limit(t[:, 0], cohesion, tan_phi)

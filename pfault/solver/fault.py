@@ -147,6 +147,7 @@ class FaultSystem:
         self.slip_reg = np.zeros(nf)
         # state
         self.state = np.full(nf, ct.STICK)
+        self.t0 = np.zeros((nf, 3))         # initial (prestress) traction, local; loads nothing
         self.g_prev = np.zeros((nf, 3))     # local jump at the start of the step
         self.t_prev = np.zeros((nf, 3))     # local traction at the start of the step
         # the faces' multipliers in serial order on every rank (stabilisation)
@@ -254,7 +255,8 @@ class FaultSystem:
         st = self.state.copy()
         if np.any(pen):
             t[pen], d[pen], st[pen] = ct.penalty_traction(gl[pen], self.g_prev[pen], self.t_prev[pen], self.kn[pen],
-                                                          self.kt[pen], self.cohesion[pen], self.tan_phi[pen])
+                                                          self.kt[pen], self.cohesion[pen], self.tan_phi[pen],
+                                                          self.t0[pen, 0])
         return t, d, st
 
     def _stab_rows(self, t_all):
@@ -299,8 +301,9 @@ class FaultSystem:
             t[lag] = self.tractions(x_loc)[lag]
         tp, _, _ = self._penalty(gl)
         t = np.where(lag[:, None], t, tp)
-        # forces on the displacement dofs: minus side +(A/3) R^T t... sign: jump test function
-        force = np.einsum("nji,nj->ni", self.R, t) * (self.area / 3.0)[:, None]              # global, per vertex
+        # forces on the displacement dofs from the traction change (the initial traction is in equilibrium
+        # with the initial stress): minus side -(A/3) R^T dt, plus side +(A/3) R^T dt
+        force = np.einsum("nji,nj->ni", self.R, t - self.t0) * (self.area / 3.0)[:, None]     # global, per vertex
         fu = self.sign[None, :] * np.tile(force, (1, 6)) * self.u_mask
         out += np.bincount(self.u_dofs.ravel(), weights=fu.ravel(), minlength=len(out))
         if self.has_lagrange and np.any(lag):

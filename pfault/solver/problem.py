@@ -141,7 +141,15 @@ class ElasticProblem:
             arr[self.bc_local_owned] += b.scale(t) * g.getArray()[self.bc_local_owned]
 
     def geostatic_prestress(self, snes):
-        """Elastic gravity solve, then horizontal effective stress set by K0; returns sigma0 per cell."""
+        """Initial (geostatic) stress state, assumed in equilibrium with zero displacement.
+
+        The vertical stress comes from an elastic gravity solve (faults glued), which gives the overburden
+        in flat layers and the arching around stiff bodies; the horizontal stresses follow the K0 rule on
+        effective stresses, sigma'_h = K0 sigma'_v, with hydrostatic pore pressure below the water table
+        (K0 = -pfault_geostatic_k0, default nu/(1-nu) of each material); no initial shear. The state loads
+        nothing: displacements are those caused by the drawdown, and stresses and fault tractions are the
+        initial ones plus the changes.
+        """
         s = self.settings
         grav = np.zeros(self.dofmap.n_local)
         self.asm.gravity_load(s.gravity, grav)
@@ -156,14 +164,13 @@ class ElasticProblem:
         alpha = self.asm.alpha
         nu = self.asm.lam / (2 * (self.asm.lam + self.asm.mu))
         k0 = np.full(len(z), s.k0) if s.k0 >= 0 else nu / (1 - nu)
-        sv_eff = sig[:, 2, 2] + alpha * p0
-        sh = k0 * sv_eff - alpha * p0
-        sigma0 = sig.copy()
+        sv = sig[:, 2, 2]
+        sh = k0 * (sv + alpha * p0) - alpha * p0
+        sigma0 = np.zeros_like(sig)
         sigma0[:, 0, 0] = sigma0[:, 1, 1] = sh
-        sigma0[:, 0, 1] = sigma0[:, 1, 0] = 0.0
+        sigma0[:, 2, 2] = sv
         self.sigma0 = sigma0
-        self.asm.gravity_load(s.gravity, self.static_local)
-        self.asm.initial_stress_load(sigma0, self.static_local)
+        self.u.set(0.0)
         return sigma0
 
     def _solve_gravity(self, snes, ug):
@@ -206,11 +213,11 @@ class ElasticProblem:
         return snes
 
     # -- post-processing -------------------------------------------------------------------------
-    def cell_total_stress(self, u_local, t):
+    def cell_total_stress(self, u_local, dp):
+        """Total stress per cell: initial + C:eps(u) - alpha dp I (dp per cell, Pa)."""
         sig = self.asm.effective_stress(u_local)
         if self.sigma0 is not None:
             sig = sig + self.sigma0
-        dp = self.cell_dp(t) if self.drawdown.active else np.zeros(len(sig))
         return sig - (self.asm.alpha * dp)[:, None, None] * np.eye(3)
 
     def destroy(self):
@@ -301,16 +308,14 @@ class FaultProblem(ElasticProblem):
 
     def geostatic_prestress(self, snes):
         sigma0 = super().geostatic_prestress(snes)
-        # start the initial equilibrium from the prestress tractions on the faults
+        # the faults carry the initial stress: their tractions start from it and only the change loads
         f = self.faults
-        if f.has_lagrange and f.nf:
-            loc = self.local_array(self.u)
-            t0 = f.initial_tractions(sigma0)
-            lag = np.nonzero(f.lagrange)[0]
-            loc[f.lm_dofs[lag]] = t0[lag]
-            self._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=self.u)
-        else:
-            self._to_global(self.local_array(self.u), PETSc.InsertMode.INSERT_VALUES, out=self.u)
+        f.t0 = f.initial_tractions(sigma0)
+        loc = self.local_array(self.u)
+        lag = np.nonzero(f.lagrange)[0]
+        loc[f.lm_dofs[lag]] = f.t0[lag]
+        self._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=self.u)
+        f.begin_step(loc)
         return sigma0
 
     def _solve_gravity(self, snes, ug):

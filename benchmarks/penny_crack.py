@@ -1,0 +1,125 @@
+#!/usr/bin/env python
+"""Penny-shaped crack under remote tension (Sneddon): accuracy of the fault opening under refinement.
+
+    .venv/bin/python benchmarks/penny_crack.py [--levels 4 6 8 10 12 16] [--ranks 1] [--L 8]
+                                               [--no-stabilisation-check] [--out runs/penny_crack]
+
+For each level n (element size a/n at the crack, a/(3n) at its tip; tests/scripts/penny_mesh.py)
+makes the quarter-model mesh, runs config/penny_crack.opts on it (``python -m pfault``, under mpirun
+for --ranks > 1) and prints one table row: tetrahedra, dofs, crack faces, the error of the largest
+face opening against w0, the error of the face nearest to the centre, the area-weighted RMS error
+over the crack divided by w0, the observed rates (h = a/n) against the previous level, the states
+(stick/slip/open) and the wall times (meshing; pfault run as measured here, and as pfault reports it).
+Then it runs the coarsest level once more without the traction-jump stabilisation and reports what
+happens. A JSON line with every figure ends the output.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
+from penny_mesh import crack_errors, make_penny_mesh, read_fault_step  # noqa: E402
+
+SCENE = os.path.join(REPO, "config", "penny_crack.opts")
+
+
+def environment():
+    env = dict(os.environ)
+    env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", OMPI_MCA_btl_vader_single_copy_mechanism="none")
+    if os.geteuid() == 0:
+        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    return env
+
+
+def run_pfault(mesh, out, ranks, extra=()):
+    cmd = [sys.executable, "-m", "pfault", SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *extra]
+    if ranks > 1:
+        cmd = ["mpirun", "-n", str(ranks), "--oversubscribe"] + cmd
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=REPO, env=environment(), capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    summary = None
+    if os.path.exists(os.path.join(out, "summary.json")):
+        with open(os.path.join(out, "summary.json")) as fh:
+            summary = json.load(fh)
+    return proc, summary, wall
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--levels", type=int, nargs="+", default=[4, 6, 8, 10, 12, 16])
+    p.add_argument("--ranks", type=int, default=1)
+    p.add_argument("--a", type=float, default=1.0)
+    p.add_argument("--L", type=float, default=8.0)
+    p.add_argument("--out", default=os.path.join(REPO, "runs", "penny_crack"))
+    p.add_argument("--no-stabilisation-check", action="store_true")
+    args = p.parse_args(argv)
+    os.makedirs(args.out, exist_ok=True)
+
+    rows = []
+    print(f"penny crack a = {args.a:g} m, L = {args.L:g} m, {args.ranks} rank(s): errors of the face openings "
+          "against Sneddon's w(r)")
+    print(f"{'n':>3} {'tets':>8} {'dofs':>8} {'faces':>6} {'max err':>8} {'centre':>8} {'RMS err':>8} "
+          f"{'rate max':>8} {'rate RMS':>8} {'stick/slip/open':>16} {'mesh s':>7} {'run s':>7} {'pfault s':>8}")
+    for n in args.levels:
+        mesh = os.path.join(args.out, f"penny{n}.msh")
+        t0 = time.perf_counter()
+        m = make_penny_mesh(mesh, args.a, args.L, n)
+        mesh_s = time.perf_counter() - t0
+        out = os.path.join(args.out, f"n{n}_r{args.ranks}")
+        proc, summary, wall = run_pfault(mesh, out, args.ranks)
+        if proc.returncode != 0:
+            print(f"n = {n}: pfault exited {proc.returncode}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
+            break
+        e = crack_errors(out, a=args.a)
+        row = {"n": n, "tets": m["tets"], "nodes": m["nodes"], "dofs": summary["dofs"], "faces": e["faces"],
+               "max_error": e["max_error"], "centre_error": e["centre_error"], "rms_error": e["rms_error"],
+               "states": e["states"], "mesh_s": round(mesh_s, 2), "run_s": round(wall, 2),
+               "pfault_s": round(summary["wall_s"]["total"], 2), "ranks": args.ranks}
+        rate = ["", ""]
+        if rows:
+            prev = rows[-1]
+            h = np.log(n / prev["n"])
+            row["rate_max"] = float(np.log(abs(prev["max_error"]) / abs(e["max_error"])) / h)
+            row["rate_rms"] = float(np.log(prev["rms_error"] / e["rms_error"]) / h)
+            rate = [f"{row['rate_max']:.2f}", f"{row['rate_rms']:.2f}"]
+        rows.append(row)
+        print(f"{n:>3} {m['tets']:>8} {summary['dofs']:>8} {e['faces']:>6} {100 * e['max_error']:>+7.2f}% "
+              f"{100 * e['centre_error']:>+7.2f}% {100 * e['rms_error']:>7.2f}% {rate[0]:>8} {rate[1]:>8} "
+              f"{'/'.join(map(str, e['states'])):>16} {mesh_s:>7.2f} {wall:>7.2f} {summary['wall_s']['total']:>8.2f}",
+              flush=True)
+
+    result = {"a": args.a, "L": args.L, "ranks": args.ranks, "levels": rows}
+    if not args.no_stabilisation_check and rows:
+        n = rows[0]["n"]
+        out = os.path.join(args.out, f"n{n}_r{args.ranks}_nostab")
+        proc, summary, wall = run_pfault(os.path.join(args.out, f"penny{n}.msh"), out, args.ranks,
+                                         ["-pfault_fault_crack_stabilization", "false"])
+        check = {"n": n, "exit_code": proc.returncode, "run_s": round(wall, 2)}
+        if summary is not None:
+            step = summary["steps"][-1]
+            check.update({k: step.get(k) for k in ("converged", "reason", "newton_its", "active_set_its", "stick",
+                                                   "slip", "open")})
+        if proc.returncode == 0:
+            w_ref = read_fault_step(os.path.join(args.out, f"n{n}_r{args.ranks}"))[2]["opening"]
+            w = read_fault_step(out)[2]["opening"]
+            check["opening_rel_diff"] = float(np.linalg.norm(w - w_ref) / np.linalg.norm(w_ref))
+            print(f"without stabilisation (n = {n}): converged; opening differs by "
+                  f"{check['opening_rel_diff']:.2e} (relative L2)")
+        else:
+            print(f"without stabilisation (n = {n}): exit code {proc.returncode}, converged "
+                  f"{check.get('converged')}, SNES reason {check.get('reason')} after {check.get('newton_its')} "
+                  f"Newton its in active-set iteration {check.get('active_set_its')} (states stick/slip/open "
+                  f"{check.get('stick')}/{check.get('slip')}/{check.get('open')})")
+        result["without_stabilisation"] = check
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
