@@ -111,7 +111,7 @@ SPECS = [
     _s("pfault_contact_traction_tol", "quantity", -1.0, "Pa", "tensile normal traction that opens a closed "
        "face (default 1e-8 of the largest Young's modulus)"),
     _s("pfault_contact_opening_tol", "quantity", -1.0, "m", "interpenetration that closes an open face "
-       "(default 1e-12 of the mesh size)"),
+       "(default 1e-6 of each face's size)"),
     _s("pfault_contact_slip_tol", "quantity", 1e-3, "", "relative hysteresis of the stick/slip switch"),
     _s("pfault_contact_slip_regularization", "quantity", 0.0, "", "slip-direction regularisation eps as a "
        "fraction of the face size: s = dg/sqrt(|dg|^2 + eps^2) (0: exact Coulomb; small values help faces "

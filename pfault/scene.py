@@ -245,7 +245,7 @@ def read_contact_options(reader, materials, serial_extent):
     otol = reader.get("pfault_contact_opening_tol")
     return {"max_active_set_its": reader.get("pfault_contact_max_active_set_its"),
             "traction_tol": ttol if ttol >= 0 else 1e-8 * emax,
-            "opening_tol": otol if otol >= 0 else 1e-12 * serial_extent,
+            "opening_tol": otol,
             "slip_tol": reader.get("pfault_contact_slip_tol"),
             "active_set_tol": reader.get("pfault_contact_active_set_tol"),
             "monitor": reader.get("pfault_contact_monitor"),

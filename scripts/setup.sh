@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what pfault needs on Debian 12, once: Debian's PETSc stack, OpenBLAS, and a venv
-# (system site packages) holding pfault (editable), gmsh, meshio and pytest. Seconds when ready.
+# (system site packages) holding pfault (editable), gmsh, meshio, pytest and matplotlib (figures).
+# Seconds when ready.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
@@ -19,10 +20,10 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv (with system site packages: Debian's petsc4py, mpi4py, numpy, h5py)"
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
-if ! .venv/bin/python -c "import gmsh, meshio, pytest" >/dev/null 2>&1; then
-  echo "setup: installing gmsh, meshio, pytest into .venv"
-  # numpy stays Debian's (petsc4py is compiled against it)
-  .venv/bin/pip install -q --disable-pip-version-check gmsh meshio pytest "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
+if ! .venv/bin/python -c "import gmsh, meshio, pytest, matplotlib" >/dev/null 2>&1; then
+  echo "setup: installing gmsh, meshio, pytest, matplotlib into .venv"
+  # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command
+  .venv/bin/pip install -q --disable-pip-version-check gmsh meshio pytest matplotlib "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
 fi
 if ! .venv/bin/python -c "import pfault, sys; sys.exit(0 if pfault.__file__.startswith('$PWD') else 1)" >/dev/null 2>&1; then
   .venv/bin/pip install -q --disable-pip-version-check --no-build-isolation --no-deps -e .

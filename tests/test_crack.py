@@ -2,7 +2,7 @@
 
 Quarter model (config/penny_crack.opts, mesh from tests/scripts/penny_mesh.py, a = 1 m, L = 8 a,
 E = 10 GPa, nu = 0.25, sigma = 1 MPa). Exact opening w(r) = 8 (1-nu^2) sigma/(pi E) sqrt(a^2 - r^2).
-Errors of the face openings of fault.xdmf (see penny_mesh.crack_errors), measured with gmsh 4 on the
+Errors of the face openings of fault.xdmf (see penny_mesh.crack_errors), measured with gmsh 4.15.2 on the
 meshes n = 4, 6, 10 (element size a/n at the crack, a/(3n) at its tip):
 
     n    tets   crack faces   max-opening error   RMS error / w0

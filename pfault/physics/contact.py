@@ -82,11 +82,13 @@ def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_to
             tt = t[j, 1:]
             tn = np.linalg.norm(tt, axis=1)
             tm = tau[~moving]
-            safe = tn > 0
-            ratio = np.where(safe, tm / np.where(safe, tn, 1.0), 0.0)
+            safe = tn > 1e-300
+            inv = np.where(safe, 1.0 / np.where(safe, tn, 1.0), 0.0)
+            ratio = tm * inv
             r[j, 1:] = A[j, None] * tt * (1.0 - ratio)[:, None]
             eye = np.eye(2)[None]
-            outer = np.einsum("ni,nj->nij", tt, tt) / np.where(safe, tn, 1.0)[:, None, None] ** 3
+            unit_t = tt * inv[:, None]
+            outer = np.einsum("ni,nj->nij", unit_t, unit_t) * inv[:, None, None]
             dtt = (1.0 - ratio)[:, None, None] * eye + np.where(safe, tm, 0.0)[:, None, None] * outer
             dt[j, 1:, 1:] = A[j, None, None] * dtt
             unit = np.where(safe[:, None], tt / np.where(safe, tn, 1.0)[:, None], 0.0)
@@ -131,7 +133,7 @@ def violation(state, new, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol
     v = np.where((state != OPEN) & (new == OPEN), t[:, 0] / ref, v)
     v = np.where((state == STICK) & (new == SLIP), (tt - tau) / ref, v)
     v = np.where((state == SLIP) & (new == STICK), (tau - tt) / ref, v)
-    v = np.where((state == OPEN) & (new == STICK), -g_loc[:, 0] / max(opening_tol, 1e-300), v)
+    v = np.where((state == OPEN) & (new == STICK), -g_loc[:, 0] / np.maximum(opening_tol, 1e-300), v)
     return np.where(new != state, np.maximum(v, 1e-300), 0.0)
 
 

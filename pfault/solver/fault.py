@@ -203,7 +203,7 @@ class FaultSystem:
         self.t_prev = t_new
         self.state = np.where(self.state == ct.SLIP, ct.STICK, self.state)
         self.visited = (1 << self.state).astype(np.int64)   # states each face has held in this step
-        self.frozen = np.zeros(self.nf, bool)                # faces that chattered: kept as they are
+        self.banned = np.zeros(self.nf, np.int64)            # states a face may not re-enter (it chattered)
         self._sync_state()
         self.t_prev_all = self.gather_faces(self.t_prev)
 
@@ -356,11 +356,15 @@ class FaultSystem:
             J.setValuesRCV(self.g_u[idx], self.g_u[idx], blk.reshape(len(idx), 324).copy(), addv=ADD)
 
     # -- active set ---------------------------------------------------------------------------
+    @property
+    def frozen(self):
+        return self.banned != 0
+
     def save_state(self):
-        self._saved = (self.state.copy(), self.visited.copy(), self.frozen.copy())
+        self._saved = (self.state.copy(), self.visited.copy(), self.banned.copy())
 
     def restore_state(self):
-        self.state, self.visited, self.frozen = (a.copy() for a in self._saved)
+        self.state, self.visited, self.banned = (a.copy() for a in self._saved)
         self._sync_state()
 
     def update_active_set(self, x_loc, traction_tol, opening_tol, slip_tol_ratio, fraction=1.0):
@@ -371,12 +375,13 @@ class FaultSystem:
         change (at least one: those asking most strongly, ranked over all ranks) changes: the bounded
         update after a configuration that Newton could not solve."""
         lag = np.nonzero(self.lagrange)[0]
+        opening_tol = self._opening_tol(opening_tol)[lag]
         old = self.state[lag]
         _, gl = self.jumps(x_loc)
         t = self.tractions(x_loc)
         new = ct.update_states(old, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
                                opening_tol, slip_tol_ratio, slip_to_stick=not np.any(self.slip_reg > 0))
-        new = np.where(self.frozen[lag], old, new)
+        new = np.where((self.banned[lag] >> new) & 1 == 1, old, new)
         if fraction < 1.0:
             v = ct.violation(old, new, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
                              opening_tol)
@@ -385,8 +390,10 @@ class FaultSystem:
             if len(allv) > keep:
                 threshold = np.sort(allv)[::-1][keep - 1]
                 new = np.where(v >= threshold, new, old)
+        # anti-chatter: a face returning to a state it held earlier in the step may not go back to the one it
+        # leaves (it may still move on to the third state)
         back = (new != old) & (((self.visited[lag] >> new) & 1) == 1)
-        self.frozen[lag] |= back
+        self.banned[lag] |= np.where(back, 1 << old, 0)
         self.visited[lag] |= 1 << new
         self.last_transitions = self.mpi.allreduce(ct.transition_counts(old, new), op=MPI.SUM)
         changed = float(self.area[lag][new != old].sum())
@@ -396,8 +403,27 @@ class FaultSystem:
         self._sync_state()
         return self.mpi.allreduce(changed, op=MPI.SUM)
 
+    def _opening_tol(self, tol):
+        """Per-face interpenetration tolerance: the user's value, or 1e-6 of the face size."""
+        return np.full(self.nf, tol) if tol >= 0 else 1e-6 * self.h
+
+    def frozen_violations(self, x_loc, traction_tol, opening_tol, slip_tol_ratio):
+        """Frozen faces whose state the contact conditions reject (they would change without the freeze)."""
+        lag = np.nonzero(self.lagrange & self.frozen)[0] if hasattr(self, "banned") else np.zeros(0, np.int64)
+        bad = 0
+        if len(lag):
+            opening_tol = self._opening_tol(opening_tol)[lag]
+            _, gl = self.jumps(x_loc)
+            t = self.tractions(x_loc)
+            new = ct.update_states(self.state[lag], t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag],
+                                   traction_tol, opening_tol, slip_tol_ratio,
+                                   slip_to_stick=not np.any(self.slip_reg > 0))
+            bad = int(np.count_nonzero((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1)))
+        return int(self.mpi.allreduce(bad, op=MPI.SUM))
+
     def frozen_count(self):
-        return int(self.mpi.allreduce(int(np.count_nonzero(getattr(self, "frozen", np.zeros(0, bool)))), op=MPI.SUM))
+        n = int(np.count_nonzero(self.frozen)) if hasattr(self, "banned") else 0
+        return int(self.mpi.allreduce(n, op=MPI.SUM))
 
     def counts_by_state(self, x_loc):
         st = self.current_states(x_loc)

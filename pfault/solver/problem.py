@@ -299,6 +299,7 @@ class FaultProblem(ElasticProblem):
         snes.setJacobian(self.jacobian, self.J, self.J)
         snes.setFromOptions()
         snes.setConvergenceHistory()
+        self._configure_fieldsplit(snes.getKSP().getPC())
         snes.setUp()
         self.jacobian(snes, self.u, self.J, self.J)
         ksp = snes.getKSP()
@@ -327,6 +328,39 @@ class FaultProblem(ElasticProblem):
         snes.solve(None, ug)
         self.faults.state = saved
         self.faults._sync_state()
+
+    def _configure_fieldsplit(self, pc):
+        """Named splits for PCFIELDSPLIT (options -fieldsplit_displacement_*, -fieldsplit_lagrange_multiplier_fault_*)
+        with the rigid-body modes of the displacement block as its near-null space (for GAMG)."""
+        if pc.getType() != PETSc.PC.Type.FIELDSPLIT or not self.faults.has_lagrange:
+            return
+        from ..fields import DISPLACEMENT, LAGRANGE
+        loc = np.zeros(self.dofmap.n_local)
+        lag = np.nonzero(self.faults.lagrange)[0]
+        loc[self.faults.lm_dofs[lag].ravel()] = 1.0
+        g = self._to_global(loc, PETSc.InsertMode.INSERT_VALUES)
+        start, _ = g.getOwnershipRange()
+        mark = g.getArray() > 0.5
+        g.destroy()
+        idx = np.arange(len(mark), dtype=PETSc.IntType) + start
+        self.is_u = PETSc.IS().createGeneral(idx[~mark], comm=self.comm)
+        self.is_lm = PETSc.IS().createGeneral(idx[mark], comm=self.comm)
+        self.is_u.setBlockSize(1)
+        vecs = []
+        for v in self.nullspace.getVecs():
+            sub = v.getSubVector(self.is_u)
+            w = sub.copy()
+            v.restoreSubVector(self.is_u, sub)
+            vecs.append(w)
+        for i, v in enumerate(vecs):          # re-orthonormalise on the subspace
+            for w in vecs[:i]:
+                v.axpy(-v.dot(w), w)
+            v.normalize()
+        self.u_nullspace = PETSc.NullSpace().create(vectors=vecs, comm=self.comm)
+        for v in vecs:
+            v.destroy()
+        self.is_u.compose("nearnullspace", self.u_nullspace)
+        pc.setFieldSplitIS((DISPLACEMENT, self.is_u), (LAGRANGE, self.is_lm))
 
     def solve_step(self, snes, t):
         """Newton solves until the active set settles; returns the step record."""
@@ -390,6 +424,12 @@ class FaultProblem(ElasticProblem):
                "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
         rec.update(counts)
         rec["frozen_faces"] = self.faults.frozen_count()
+        rec["frozen_violating"] = self.faults.frozen_violations(x_loc, o["traction_tol"], o["opening_tol"],
+                                                                o["slip_tol"])
+        if converged and settled and rec["frozen_violating"] > 0:
+            # faces held in place by the anti-chatter rule break the contact conditions: not a solution
+            rec["converged"] = False
+            rec["reason"] = f"{rec['frozen_violating']} faces kept by the anti-chatter rule violate the contact conditions"
         if converged and not settled:
             rec["reason"] = "active set did not settle"
         return rec
@@ -397,6 +437,9 @@ class FaultProblem(ElasticProblem):
     def destroy(self):
         super().destroy()
         self.J.destroy()
+        for name in ("is_u", "is_lm", "u_nullspace"):
+            if hasattr(self, name):
+                getattr(self, name).destroy()
 
 
 def _extend_pattern(K0, rows, cols):
