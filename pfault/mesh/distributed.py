@@ -155,44 +155,31 @@ def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=No
                      n_global_cells=n_global[0], n_global_vertices=n_global[1])
 
 
-def gather_vertex_values(mesh, values):
-    """Values per local vertex (nv, k) -> (n_global_vertices, k) in serial order on rank 0 (None elsewhere)."""
-    values = np.ascontiguousarray(values, dtype=np.float64)
-    k = values.shape[1]
-    comm = mesh.dm.getComm()
-    if mesh.migration is None:
-        return values.copy()
-    p_start, p_end = mesh.dm.getChart()
-    leaf = np.zeros((p_end - p_start, k))
-    leaf[mesh.v_start:mesh.v_start + len(values)] = values
-    nroots = mesh.migration.getGraph()[0]
-    root = np.zeros((nroots, k))
-    unit = MPI.DOUBLE.Create_contiguous(k)
-    unit.Commit()
-    mesh.migration.reduceBegin(unit, leaf, root, MPI.REPLACE)
-    mesh.migration.reduceEnd(unit, leaf, root, MPI.REPLACE)
-    unit.Free()
-    if comm.rank == 0:
-        return root[mesh.n_global_cells:]
-    return None
-
-
-def gather_cell_values(mesh, values):
-    """Values per local cell (nc, k) -> (n_global_cells, k) in serial order on rank 0 (None elsewhere)."""
+def _gather(mesh, values, offset, count):
+    """Reduce per-point values of local points [offset, offset + len(values)) to rank 0 in serial order."""
     values = np.ascontiguousarray(values, dtype=np.float64)
     k = values.shape[1]
     if mesh.migration is None:
         return values.copy()
     p_start, p_end = mesh.dm.getChart()
     leaf = np.zeros((p_end - p_start, k))
-    leaf[:len(values)] = values
-    nroots = mesh.migration.getGraph()[0]
-    root = np.zeros((nroots, k))
+    leaf[offset:offset + len(values)] = values
+    root = np.zeros((mesh.migration.getGraph()[0], k))
     unit = MPI.DOUBLE.Create_contiguous(k)
     unit.Commit()
     mesh.migration.reduceBegin(unit, leaf, root, MPI.REPLACE)
     mesh.migration.reduceEnd(unit, leaf, root, MPI.REPLACE)
     unit.Free()
     if mesh.dm.getComm().rank == 0:
-        return root[:mesh.n_global_cells]
+        return root[count[0]:count[1]]
     return None
+
+
+def gather_vertex_values(mesh, values):
+    """Values per local vertex (nv, k) -> (n_global_vertices, k) in serial order on rank 0 (None elsewhere)."""
+    return _gather(mesh, values, mesh.v_start, (mesh.n_global_cells, mesh.n_global_cells + mesh.n_global_vertices))
+
+
+def gather_cell_values(mesh, values):
+    """Values per local cell (nc, k) -> (n_global_cells, k) in serial order on rank 0 (None elsewhere)."""
+    return _gather(mesh, values, 0, (0, mesh.n_global_cells))
