@@ -346,3 +346,16 @@ def test_tractions_oscillate_without_stabilisation(tmp_path):
     assert conv and all_stick and spread < 1e-10
     spread, all_stick, _ = results["false"]
     assert spread > 1e-3 or not all_stick, results
+
+
+@pytest.mark.parametrize("case", ["stick", "slip", "open"])
+def test_fieldsplit_solver_reaches_the_direct_solution(runs, case):
+    """config/solver/fieldsplit.opts (Schur fieldsplit, GAMG on the augmented displacement block) converges on
+    every two-blocks state, including the ones where a block is held only by the fault, and gives the MUMPS answer."""
+    direct, fd, _ = runs(case, 2)
+    it, fi, _ = runs(case, 2, ("-pfault_solver", "fieldsplit"))
+    assert it["converged"] and it["steps"][-1]["ksp_its"] > it["steps"][-1]["newton_its"]
+    assert np.array_equal(fi["state"], fd["state"])
+    for key in ("slip_magnitude", "opening", "traction_normal"):
+        scale = max(np.abs(fd[key]).max(), 1e-3 if key != "traction_normal" else P)
+        assert np.abs(fi[key] - fd[key]).max() <= 1e-7 * scale, key

@@ -289,6 +289,10 @@ class FaultProblem(ElasticProblem):
         x_loc = self.local_array(x)
         self.faults.add_jacobian(x_loc, self._lm_all(x_loc), self.J)
         self.J.assemble()
+        if self.P is not self.J:
+            self.J.copy(self.P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            self.faults.add_augmentation(self.P)
+            self.P.assemble()
 
     def create_snes(self):
         apply_solver_defaults(linear=False)
@@ -296,14 +300,19 @@ class FaultProblem(ElasticProblem):
         snes.setDM(self.dm)
         snes.getKSP().setDMActive(False)
         snes.setFunction(self.residual, self.F)
+        self.P = self.J
         snes.setJacobian(self.jacobian, self.J, self.J)
         snes.setFromOptions()
         snes.setConvergenceHistory()
-        self._configure_fieldsplit(snes.getKSP().getPC())
+        if self._configure_fieldsplit(snes.getKSP().getPC()):
+            # Schur-complement fieldsplit preconditions with the augmented matrix (nonsingular displacement block)
+            self.P = self.J.duplicate(copy=True)
+            self.P.setNearNullSpace(self.nullspace)
+            snes.setJacobian(self.jacobian, self.J, self.P)
         snes.setUp()
-        self.jacobian(snes, self.u, self.J, self.J)
+        self.jacobian(snes, self.u, self.J, self.P)
         ksp = snes.getKSP()
-        ksp.setOperators(self.J, self.J)
+        ksp.setOperators(self.J, self.P)
         ksp.setUp()
         return snes
 
@@ -333,7 +342,7 @@ class FaultProblem(ElasticProblem):
         """Named splits for PCFIELDSPLIT (options -fieldsplit_displacement_*, -fieldsplit_lagrange_multiplier_fault_*)
         with the rigid-body modes of the displacement block as its near-null space (for GAMG)."""
         if pc.getType() != PETSc.PC.Type.FIELDSPLIT or not self.faults.has_lagrange:
-            return
+            return False
         from ..fields import DISPLACEMENT, LAGRANGE
         loc = np.zeros(self.dofmap.n_local)
         lag = np.nonzero(self.faults.lagrange)[0]
@@ -361,6 +370,7 @@ class FaultProblem(ElasticProblem):
             v.destroy()
         self.is_u.compose("nearnullspace", self.u_nullspace)
         pc.setFieldSplitIS((DISPLACEMENT, self.is_u), (LAGRANGE, self.is_lm))
+        return True
 
     def solve_step(self, snes, t):
         """Newton solves until the active set settles; returns the step record."""
@@ -436,6 +446,8 @@ class FaultProblem(ElasticProblem):
 
     def destroy(self):
         super().destroy()
+        if getattr(self, "P", None) is not None and self.P is not self.J:
+            self.P.destroy()
         self.J.destroy()
         for name in ("is_u", "is_lm", "u_nullspace"):
             if hasattr(self, name):
