@@ -25,6 +25,6 @@ if ! .venv/bin/python -c "import gmsh, meshio, pytest, matplotlib" >/dev/null 2>
   # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command
   .venv/bin/pip install -q --disable-pip-version-check gmsh meshio pytest matplotlib "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
 fi
-if ! .venv/bin/python -c "import pfault, sys; sys.exit(0 if pfault.__file__.startswith('$PWD') else 1)" >/dev/null 2>&1; then
+if ! .venv/bin/python -I -c "import pfault, sys; sys.exit(0 if pfault.__file__.startswith('$PWD') else 1)" >/dev/null 2>&1; then
   .venv/bin/pip install -q --disable-pip-version-check --no-build-isolation --no-deps -e .
 fi

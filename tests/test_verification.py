@@ -28,7 +28,7 @@ def test_mms_same_on_two_ranks():
 def make_patch_mesh(path):
     """Unstructured tetrahedral box 0..3 x 0..2 x -1..0 with named physical volume and surfaces."""
     import gmsh
-    gmsh.initialize(["pfault-test", "-noenv"], readConfigFiles=False)
+    gmsh.initialize(["pfault-test"], readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
     gmsh.model.add("patch")
     gmsh.model.occ.addBox(0, 0, -1, 3, 2, 1)

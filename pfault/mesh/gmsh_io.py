@@ -22,7 +22,7 @@ def read_msh(path):
     import gmsh
     initialized = gmsh.isInitialized()
     if not initialized:
-        gmsh.initialize(["pfault", "-noenv"], readConfigFiles=False)
+        gmsh.initialize(["pfault"], readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
     try:
         gmsh.clear()
