@@ -4,5 +4,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 source scripts/env.sh
-SCENE="${SCENE:-config/demo.opts}"
+SCENE="${SCENE:-config/wuxi.opts}"
 exec mpirun -n "${RANKS:-2}" .venv/bin/python -m pfault "$SCENE" "$@"
