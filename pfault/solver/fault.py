@@ -202,6 +202,7 @@ class FaultSystem:
         self.g_prev = gl
         self.t_prev = t_new
         self.state = np.where(self.state == ct.SLIP, ct.STICK, self.state)
+        self.last_change = (np.zeros(0, np.int64), np.zeros(0, np.int64))
         self.visited = (1 << self.state).astype(np.int64)   # states each face has held in this step
         self.banned = np.zeros(self.nf, np.int64)            # states a face may not re-enter (it chattered)
         self._sync_state()
@@ -412,6 +413,7 @@ class FaultSystem:
                 new = np.where(v >= threshold, new, old)
         # anti-chatter: a face returning to a state it held earlier in the step may not go back to the one it
         # leaves (it may still move on to the third state)
+        self.last_change = (lag[new != old], new[new != old])
         back = (new != old) & (((self.visited[lag] >> new) & 1) == 1)
         self.banned[lag] |= np.where(back, 1 << old, 0)
         self.visited[lag] |= 1 << new
@@ -440,6 +442,15 @@ class FaultSystem:
                                    slip_to_stick=not np.any(self.slip_reg > 0))
             bad = int(np.count_nonzero((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1)))
         return int(self.mpi.allreduce(bad, op=MPI.SUM))
+
+    def ban_last_change(self):
+        """Forbid the changes of the last update (a single face whose change Newton could not solve even
+        alone); returns how many faces were banned (all ranks)."""
+        faces, states = getattr(self, "last_change", (np.zeros(0, np.int64), np.zeros(0, np.int64)))
+        self.banned[faces] |= 1 << states
+        if hasattr(self, "_saved"):
+            self._saved[2][faces] |= 1 << states
+        return int(self.mpi.allreduce(len(faces), op=MPI.SUM))
 
     def frozen_count(self):
         n = int(np.count_nonzero(self.frozen)) if hasattr(self, "banned") else 0

@@ -390,6 +390,7 @@ class FaultProblem(ElasticProblem):
         self.u.copy(x_conv)
         self.faults.save_state()
         fraction = 1.0
+        last_changes = 0
         for it in range(1, o["max_active_set_its"] + 1):
             snes.setConvergenceHistory(reset=True)
             snes.solve(None, self.u)
@@ -404,9 +405,13 @@ class FaultProblem(ElasticProblem):
                 fraction = 1.0
             elif reason in (-5, -6):            # DIVERGED_MAX_IT, DIVERGED_LINE_SEARCH
                 # Newton could not solve this configuration: go back to the last solved one and change
-                # fewer faces, those that ask for it most strongly (bounded configuration update)
+                # fewer faces, those that ask for it most strongly (bounded configuration update); if even a
+                # single face's change cannot be solved, that change is banned for the rest of the step
+                single = last_changes <= 1
                 x_conv.copy(self.u)
                 self.faults.restore_state()
+                if single:
+                    self.faults.ban_last_change()
                 fraction *= 0.25
             else:
                 converged = False
@@ -414,6 +419,7 @@ class FaultProblem(ElasticProblem):
             x_loc = self.local_array(self.u)
             changed = self.faults.update_active_set(x_loc, o["traction_tol"], o["opening_tol"], o["slip_tol"],
                                                     fraction)
+            last_changes = int(self.faults.last_transitions.sum() - np.trace(self.faults.last_transitions))
             if o.get("monitor"):
                 tr = self.faults.last_transitions
                 PETSc.Sys.Print(f"  active set {it:2d}: newton {its:2d} ({'converged' if reason > 0 else 'failed'}, "

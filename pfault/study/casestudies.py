@@ -56,8 +56,10 @@ EVENTS = ("MatLUFactorNum", "MatLUFactorSym", "MatSolve", "KSPSolve", "PCSetUp",
           "SNESJacobianEval", "pfaultFlowSolve", "pfaultFlowAssemble", "pfaultAssembleK")
 
 
-def run_name(case, solver="mumps", size_factor=1.0):
+def run_name(case, solver="mumps", size_factor=1.0, tag=""):
     name = case
+    if tag:
+        name += f"-{tag}"
     if solver != "mumps":
         name += f"-{solver}"
     if float(size_factor) != 1.0:
@@ -77,10 +79,10 @@ def mpi_env():
 # running
 # ------------------------------------------------------------------------------------------------------
 def run_case(case, ranks=2, solver="mumps", size_factor=1.0, extra=(), timeout=7200, python=None,
-             runs_dir="runs"):
+             runs_dir="runs", tag=""):
     """Runs one case under mpirun from the repository root; returns the driver record (also written to
     runs/<run>/casestudy.json)."""
-    name = run_name(case, solver, size_factor)
+    name = run_name(case, solver, size_factor, tag)
     out = os.path.join(runs_dir, name)
     os.makedirs(os.path.join(REPO, out), exist_ok=True)
     python = python or sys.executable
@@ -115,7 +117,7 @@ def run_case(case, ranks=2, solver="mumps", size_factor=1.0, extra=(), timeout=7
     wall = time.perf_counter() - t0
     cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
-    rec = {"case": case, "run": name, "command": shown, "ranks": ranks, "solver": solver,
+    rec = {"case": case, "run": name, "tag": tag, "extra": list(extra), "command": shown, "ranks": ranks, "solver": solver,
            "size_factor": float(size_factor), "exit_code": rc, "wall_end_to_end_s": wall, "cpu_s": cpu,
            "load_avg_1min_mean": float(np.mean(loads)), "load_avg_1min_max": float(np.max(loads)),
            "date": time.strftime("%Y-%m-%d %H:%M"), "host_cpus": os.cpu_count(), "cpu_model": _cpu_model()}
@@ -455,6 +457,7 @@ def main(argv=None):
     ap.add_argument("--size-factor", type=float, default=1.0, help="mesh size factor (default 1: paper size)")
     ap.add_argument("--no-run", action="store_true", help="only figures and README from existing runs")
     ap.add_argument("--no-readme", action="store_true", help="do not rewrite runs/README.md")
+    ap.add_argument("--tag", default="", help="name suffix of a variant run made with extra options")
     ap.add_argument("--runs-dir", default="runs")
     ap.add_argument("--timeout", type=float, default=7200.0, help="per run (s)")
     ap.add_argument("extra", nargs=argparse.REMAINDER, help="after --: more pfault/PETSc options for every run")
@@ -467,10 +470,11 @@ def main(argv=None):
     os.chdir(REPO)
     status = 0
     for c in cases:
-        name = run_name(c, args.solver, args.size_factor)
+        name = run_name(c, args.solver, args.size_factor, args.tag)
         run_dir = os.path.join(args.runs_dir, name)
         if not args.no_run:
-            rec = run_case(c, args.ranks, args.solver, args.size_factor, extra, args.timeout, runs_dir=args.runs_dir)
+            rec = run_case(c, args.ranks, args.solver, args.size_factor, extra, args.timeout, runs_dir=args.runs_dir,
+                           tag=args.tag)
             status = status or (rec["exit_code"] != 0)
         if os.path.exists(os.path.join(run_dir, "summary.json")):
             for p in fg.make_figures(run_dir):
