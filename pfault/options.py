@@ -116,6 +116,10 @@ SPECS = [
     _s("pfault_contact_slip_regularization", "quantity", 0.0, "", "slip-direction regularisation eps as a "
        "fraction of the face size: s = dg/sqrt(|dg|^2 + eps^2) (0: exact Coulomb; small values help faces "
        "whose slip is kinematically blocked)"),
+    _s("pfault_contact_chatter_tol", "quantity", 0.02, "", "faces caught oscillating between two states are "
+       "kept in one; the step fails if that leaves a violation (tension on a closed face, or shear above the "
+       "Coulomb limit) larger than this fraction of the fault's median normal traction; counts and the largest "
+       "violation are in summary.json (frozen_violating, frozen_max_violation)"),
     _s("pfault_contact_monitor", "bool", False, "", "print one line per active-set update (Newton its, "
        "residual, state transitions)"),
     _s("pfault_contact_active_set_tol", "quantity", 0.0, "", "fraction of the fault area allowed to change "

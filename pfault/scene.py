@@ -249,4 +249,5 @@ def read_contact_options(reader, materials, serial_extent):
             "slip_tol": reader.get("pfault_contact_slip_tol"),
             "active_set_tol": reader.get("pfault_contact_active_set_tol"),
             "monitor": reader.get("pfault_contact_monitor"),
+            "chatter_tol": reader.get("pfault_contact_chatter_tol"),
             "slip_regularization": reader.get("pfault_contact_slip_regularization")}

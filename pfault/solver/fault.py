@@ -402,6 +402,9 @@ class FaultSystem:
         t = self.tractions(x_loc)
         new = ct.update_states(old, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
                                opening_tol, slip_tol_ratio, slip_to_stick=not np.any(self.slip_reg > 0))
+        # a face kept closed by the anti-chatter rule while in tension cannot carry shear (tau_L = 0): it slips
+        kept_closed = (new == ct.OPEN) & (((self.banned[lag] >> ct.OPEN) & 1) == 1) & (old != ct.OPEN)
+        new = np.where(kept_closed, ct.SLIP, new)
         new = np.where((self.banned[lag] >> new) & 1 == 1, old, new)
         if fraction < 1.0:
             v = ct.violation(old, new, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
@@ -430,9 +433,14 @@ class FaultSystem:
         return np.full(self.nf, tol) if tol >= 0 else 1e-6 * self.h
 
     def frozen_violations(self, x_loc, traction_tol, opening_tol, slip_tol_ratio):
-        """Frozen faces whose state the contact conditions reject (they would change without the freeze)."""
+        """Faces kept in a state by the anti-chatter rule that the contact conditions reject, and the largest
+        such violation relative to the fault's median normal traction (tension on a closed face, or the shear
+        excess over the Coulomb limit). Returns (count, relative violation), the same on all ranks."""
+        t_all = self.tractions(x_loc)[self.lagrange] if self.has_lagrange else np.zeros((0, 3))
+        tn_all = np.concatenate(self.mpi.allgather(np.abs(t_all[:, 0])))
+        t_ref = max(float(np.median(tn_all)) if len(tn_all) else 0.0, traction_tol)
         lag = np.nonzero(self.lagrange & self.frozen)[0] if hasattr(self, "banned") else np.zeros(0, np.int64)
-        bad = 0
+        bad, worst = 0, 0.0
         if len(lag):
             opening_tol = self._opening_tol(opening_tol)[lag]
             _, gl = self.jumps(x_loc)
@@ -440,8 +448,15 @@ class FaultSystem:
             new = ct.update_states(self.state[lag], t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag],
                                    traction_tol, opening_tol, slip_tol_ratio,
                                    slip_to_stick=not np.any(self.slip_reg > 0))
-            bad = int(np.count_nonzero((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1)))
-        return int(self.mpi.allreduce(bad, op=MPI.SUM))
+            kept_closed = (new == ct.OPEN) & (((self.banned[lag] >> ct.OPEN) & 1) == 1) & (self.state[lag] != ct.OPEN)
+            viol = ((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1)) | (kept_closed & (t[lag][:, 0] > traction_tol))
+            bad = int(np.count_nonzero(viol))
+            if bad:
+                tt = t[lag][viol]
+                tau = ct.coulomb_limit(tt[:, 0], self.cohesion[lag][viol], self.tan_phi[lag][viol])
+                excess = np.maximum(tt[:, 0], np.linalg.norm(tt[:, 1:], axis=1) - tau)
+                worst = float(np.max(excess)) / t_ref
+        return int(self.mpi.allreduce(bad, op=MPI.SUM)), float(self.mpi.allreduce(worst, op=MPI.MAX))
 
     def ban_last_change(self):
         """Forbid the changes of the last update (a single face whose change Newton could not solve even

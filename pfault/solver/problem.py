@@ -440,12 +440,13 @@ class FaultProblem(ElasticProblem):
                "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
         rec.update(counts)
         rec["frozen_faces"] = self.faults.frozen_count()
-        rec["frozen_violating"] = self.faults.frozen_violations(x_loc, o["traction_tol"], o["opening_tol"],
-                                                                o["slip_tol"])
-        if converged and settled and rec["frozen_violating"] > 0:
+        nbad, worst = self.faults.frozen_violations(x_loc, o["traction_tol"], o["opening_tol"], o["slip_tol"])
+        rec["frozen_violating"], rec["frozen_max_violation"] = nbad, worst
+        if converged and settled and nbad > 0 and worst > o["chatter_tol"]:
             # faces held in place by the anti-chatter rule break the contact conditions: not a solution
             rec["converged"] = False
-            rec["reason"] = f"{rec['frozen_violating']} faces kept by the anti-chatter rule violate the contact conditions"
+            rec["reason"] = (f"{nbad} faces kept by the anti-chatter rule violate the contact conditions by up to "
+                             f"{worst:.3g} of the median normal traction (-pfault_contact_chatter_tol {o['chatter_tol']:g})")
         if converged and not settled:
             rec["reason"] = "active set did not settle"
         return rec

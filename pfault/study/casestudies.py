@@ -227,27 +227,42 @@ def _s(v):
     return "—" if v is None else f"{v:.1f}"
 
 
-def results_table(r, case):
-    p = PAPER[case]
+def _status(r):
     s = r["summary"]
-    rows = [("| quantity | paper | pfault | note |", "|---|---|---|---|")]
-    lines = list(rows[0])
-    lines.append(f"| max fault opening | {p['opening_text']} | {_m(s['max_fault_opening_m'], 'cm')} (face average); "
-                 f"{_m(r.get('surface_opening_m'), 'cm')} at the land surface (nodal) | see below |")
-    lines.append(f"| max fault slip | {p['slip_text']} | {_m(s['max_fault_slip_m'], 'cm')} (face average); "
-                 f"{_m(r.get('surface_slip_m'), 'cm')} at the land surface (nodal) | |")
-    if "dip_slip_min_m" in r:
-        lines.append(f"| dip slip u_z(plus) − u_z(minus), range over faces | — | "
-                     f"{_m(r['dip_slip_min_m'], 'cm')} … {_m(r['dip_slip_max_m'], 'cm')} | plus side: x > fault |")
-    lines.append(f"| max land subsidence | {p['subsidence_text']} | {_m(s['max_subsidence_m'])} | |")
-    lines.append(f"| max horizontal displacement (surface) | — | {_m(s['max_horizontal_displacement_m'])} | |")
-    dd = f"{r['max_drawdown_m']:.3g} m (flow model)" if r["max_drawdown_m"] else "prescribed"
-    lines.append(f"| max drawdown | {p['drawdown_text']} | {dd} | |")
-    m = s["mesh"]
+    if s.get("converged"):
+        return "converged"
+    bad = next((i for i, st in enumerate(s["steps"]) if not st.get("converged", True)), None)
+    return f"**did not converge** (step {bad}; maxima up to step {bad - 1 if bad else '?'})"
+
+
+def results_table(runs, case):
+    """Paper against one column per run of the case (default run first, then variants)."""
+    p = PAPER[case]
+    head = "| quantity | paper | " + " | ".join(f"`{os.path.basename(r['dir'])}`" for r in runs) + " |"
+    lines = [head, "|---|---|" + "---|" * len(runs)]
+
+    def row(label, paper, cells):
+        lines.append(f"| {label} | {paper} | " + " | ".join(cells) + " |")
+
+    row("status", "", [_status(r) for r in runs])
+    row("max fault opening: face average (summary.json)", p["opening_text"],
+        [_m(r["summary"]["max_fault_opening_m"], "cm") for r in runs])
+    row("max fault opening: nodal, at the land surface", p["opening_text"],
+        [_m(r.get("surface_opening_m"), "cm") for r in runs])
+    row("max fault slip: face average", p["slip_text"], [_m(r["summary"]["max_fault_slip_m"], "cm") for r in runs])
+    row("max fault slip: nodal, at the land surface", p["slip_text"], [_m(r.get("surface_slip_m"), "cm") for r in runs])
+    row("dip slip u_z(plus) − u_z(minus), range over faces (plus side: x > fault)", "—",
+        [f"{_m(r.get('dip_slip_min_m'), 'cm')} … {_m(r.get('dip_slip_max_m'), 'cm')}" for r in runs])
+    row("max land subsidence", p["subsidence_text"], [_m(r["summary"]["max_subsidence_m"]) for r in runs])
+    row("max horizontal displacement of the land surface", "—",
+        [_m(r["summary"]["max_horizontal_displacement_m"]) for r in runs])
+    row("max drawdown", p["drawdown_text"],
+        [f"{r['max_drawdown_m']:.3g} m (flow model)" if r["max_drawdown_m"] else "prescribed" for r in runs])
+    row("fault area open at the end", "—", [f"{100.0 * r.get('open_fraction', 0.0):.0f} %" for r in runs])
     for key, label, paper in (("nodes", "mesh nodes", p["nodes"]), ("cells", "mesh tetrahedra", p["tets"]),
                               ("fault_faces", "interface (fault) faces", p["fault_faces"])):
-        lines.append(f"| {label} | {paper:,} | {m[key]:,} | {_dev(m[key], paper)} |")
-    lines.append(f"| fault faces open at the end | — | {100.0 * r.get('open_fraction', 0.0):.0f} % of the area | |")
+        row(label, f"{paper:,}", [f"{r['summary']['mesh'][key]:,} ({_dev(r['summary']['mesh'][key], paper)})"
+                                  for r in runs])
     return "\n".join(lines)
 
 
