@@ -120,6 +120,14 @@ SPECS = [
        "kept in one; the step fails if that leaves a violation (tension on a closed face, or shear above the "
        "Coulomb limit) larger than this fraction of the fault's median normal traction; counts and the largest "
        "violation are in summary.json (frozen_violating, frozen_max_violation)"),
+    _s("pfault_contact_slip_direction", "choice", "increment", "", "slip direction of slipping faces: "
+       "augmented, s = q/|q| with q = t_T + (E/h) dg_T (smooth while a face starts to slip); increment, "
+       "s = dg_T/|dg_T| (needs -pfault_contact_slip_regularization where slip is kinematically blocked)",
+       choices=("augmented", "increment")),
+    _s("pfault_contact_effective_stress", "bool", True, "", "friction and opening act on the effective normal "
+       "traction t_N + alpha p (Terzaghi; p the pore pressure at the face: hydrostatic below the water table "
+       "in a geostatic scene, plus the change); an open face carries the water pressure. false: on the total "
+       "traction (dry faults)"),
     _s("pfault_contact_monitor", "bool", False, "", "print one line per active-set update (Newton its, "
        "residual, state transitions)"),
     _s("pfault_contact_active_set_tol", "quantity", 0.0, "", "fraction of the fault area allowed to change "
@@ -149,6 +157,9 @@ SPECS = [
     # time
     _s("pfault_time_end", "quantity", 1.0, "s", "end time (units allowed, e.g. 10*year)"),
     _s("pfault_time_steps", "int", 1, "", "number of equal time steps"),
+    _s("pfault_time_max_cuts", "int", 3, "", "a fault step that does not converge is retried as 2, 4, ... equal "
+       "sub-steps, halving up to this many times (0: no retry); the pore pressure of a flow model is "
+       "interpolated linearly in time between its steps"),
 ]
 
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")

@@ -52,6 +52,7 @@ class Settings:
     gravity: float
     water_density: float
     water_table: float
+    max_cuts: int = 3
 
 
 def read_settings(reader, options_file=""):
@@ -65,7 +66,10 @@ def read_settings(reader, options_file=""):
                  mesh_generator=reader.get("pfault_mesh_generator"), time_end=reader.get("pfault_time_end"),
                  time_steps=reader.get("pfault_time_steps"), geostatic=reader.get("pfault_geostatic"),
                  k0=reader.get("pfault_geostatic_k0"), gravity=reader.get("pfault_gravity"),
-                 water_density=reader.get("pfault_water_density"), water_table=reader.get("pfault_water_table"))
+                 water_density=reader.get("pfault_water_density"), water_table=reader.get("pfault_water_table"),
+                 max_cuts=reader.get("pfault_time_max_cuts"))
+    if s.max_cuts < 0 or s.max_cuts > 10:
+        raise InputError(f"-pfault_time_max_cuts: give 0 to 10 halvings, got {s.max_cuts}")
     if s.time_steps < 1:
         raise InputError("-pfault_time_steps: need at least one step")
     if s.time_end <= 0:
@@ -249,5 +253,7 @@ def read_contact_options(reader, materials, serial_extent):
             "slip_tol": reader.get("pfault_contact_slip_tol"),
             "active_set_tol": reader.get("pfault_contact_active_set_tol"),
             "monitor": reader.get("pfault_contact_monitor"),
+            "effective_stress": reader.get("pfault_contact_effective_stress"),
+            "slip_direction": reader.get("pfault_contact_slip_direction"),
             "chatter_tol": reader.get("pfault_contact_chatter_tol"),
             "slip_regularization": reader.get("pfault_contact_slip_regularization")}

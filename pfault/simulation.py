@@ -132,8 +132,11 @@ class Simulation:
         self.wall["setup"] = time.perf_counter() - t0
 
     # ------------------------------------------------------------------------------------------
-    def _solve(self, t):
-        rec = self.problem.solve_step(self.snes, t)
+    def _solve(self, t, t_prev=0.0):
+        if self.fault_settings:
+            rec = self.problem.solve_interval(self.snes, t_prev, t, self.settings.max_cuts)
+        else:
+            rec = self.problem.solve_step(self.snes, t)
         if self.flow is not None and self.flow.history:
             rec["flow_ksp_its"] = int(self.flow.history[-1].get("ksp_its", 0))
             from mpi4py import MPI
@@ -207,10 +210,11 @@ class Simulation:
         g, gl = fs.jumps(u_rel)
         slip = g - gl[:, :1] * fs.normal
         data = np.column_stack([t_loc[:, 0], t_glob - t_loc[:, :1] * fs.normal, gl[:, 0], slip,
-                                np.linalg.norm(gl[:, 1:], axis=1), state])
+                                np.linalg.norm(gl[:, 1:], axis=1), state, fs.effective(t_loc)[:, 0]])
         allf = fs.gather_faces(data)
         return {"traction_normal": allf[:, 0], "traction_shear": allf[:, 1:4], "opening": allf[:, 4],
-                "slip": allf[:, 5:8], "slip_magnitude": allf[:, 8], "state": allf[:, 9].astype(np.int64)}
+                "slip": allf[:, 5:8], "slip_magnitude": allf[:, 8], "state": allf[:, 9].astype(np.int64),
+                "traction_normal_effective": allf[:, 10]}
 
     def _fault_figures(self, u_rel_local):
         fs = self.problem.faults
@@ -245,7 +249,7 @@ class Simulation:
         for step in range(1, s.time_steps + 1):
             t = times[step]
             solve_stage.push()
-            rec = self._solve(t)
+            rec = self._solve(t, times[step - 1])
             solve_stage.pop()
             self._open_output()
             self.wall["solve"] += rec["wall_s"]
@@ -296,6 +300,8 @@ class Simulation:
             extra += f"  subsidence {rec['max_subsidence_m']:.4g} m"
         if "max_fault_opening_m" in rec:
             extra += f"  opening {rec['max_fault_opening_m']:.3g} m  slip {rec['max_fault_slip_m']:.3g} m"
+        if rec.get("substeps", 1) > 1:
+            extra += f"  ({rec['substeps']} sub-steps)"
         _print(f"step {step:4d} t = {_fmt_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
                f"ksp {rec['ksp_its']:4d}  wall {rec['wall_s']:7.2f} s{extra}"
                + ("" if rec["converged"] else f"  NOT CONVERGED (reason {rec['reason']})"))

@@ -41,6 +41,38 @@ def test_lagrange_rows_derivatives(state, moving):
     assert fd_check(lambda x: ct.lagrange_rows(st, area, g, gp, x, coh, tanphi, tol)[0], t, dt, h=1e-2) < 1e-6
 
 
+@pytest.mark.parametrize("state", [ct.STICK, ct.SLIP, ct.OPEN])
+@pytest.mark.parametrize("reg", [0.0, 1e-3])
+def test_augmented_slip_rows_derivatives(state, reg):
+    area, g, gp, t, coh, tanphi = sample()
+    st = np.full(len(area), state)
+    c = np.full(len(area), 1e7)                      # E/h-like stiffness: c dg ~ t
+    tol = np.full(len(area), 1e-12)
+    eps = np.full(len(area), reg)
+    r, dg, dt = ct.lagrange_rows(st, area, g, gp, t, coh, tanphi, tol, eps, c)
+    assert fd_check(lambda x: ct.lagrange_rows(st, area, x, gp, t, coh, tanphi, tol, eps, c)[0], g, dg) < 1e-6
+    assert fd_check(lambda x: ct.lagrange_rows(st, area, g, gp, x, coh, tanphi, tol, eps, c)[0], t, dt,
+                    h=1e-2) < 1e-6
+
+
+def test_augmented_slip_row_vanishes_on_the_cone_and_sticks_when_slip_reverses():
+    """On the cone with the increment along the traction the augmented row is zero (maximum dissipation);
+    an increment against the traction sends the face back to stick."""
+    area, g, gp, t, coh, tanphi = sample(10)
+    tau = ct.coulomb_limit(t[:, 0], coh, tanphi)
+    d = g[:, 1:] - gp[:, 1:]
+    t[:, 1:] = tau[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
+    g[:, 0] = 0.0
+    c = np.full(10, 1e7)
+    st = np.full(10, ct.SLIP)
+    r, _, _ = ct.lagrange_rows(st, area, g, gp, t, coh, tanphi, np.full(10, 1e-12), None, c)
+    assert np.abs(r).max() < 1e-9 * np.abs(t).max()
+    new = ct.update_states(st, t, g, coh, tanphi, 1.0, 1e-9, 1e-3, dg_t=d, c_aug=c)
+    assert np.all(new == ct.SLIP)
+    new = ct.update_states(st, t, g, coh, tanphi, 1.0, 1e-9, 1e-3, dg_t=-d, c_aug=c)
+    assert np.all(new == ct.STICK)
+
+
 def test_slip_row_vanishes_on_the_coulomb_cone():
     area, g, gp, t, coh, tanphi = sample(10)
     tau = ct.coulomb_limit(t[:, 0], coh, tanphi)

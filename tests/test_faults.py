@@ -155,6 +155,42 @@ def test_open_fault_is_traction_free(runs, ranks):
 
 
 # ---------------------------------------------------------------------------------------------
+# effective stress: a uniform pore-pressure rise dp unloads the fault's friction (Terzaghi)
+
+DP = 4.0e5                                   # Pa, alpha = 1
+
+
+def pore_pressure_case(tau, effective):
+    """Uniform state under total normal traction -P with the pore pressure raised by DP: sigma_zz (total) of
+    that state is lam (DP - P)/(lam + 2G) - DP (eps_yy = eps_zz = 0)."""
+    szz = LAM * (DP - P) / (LAM + 2 * G) - DP
+    return ["-pfault_material_rock_pressure_change", f"0:0,1:{DP!r}", *shear_tractions(tau, szz),
+            "-pfault_contact_effective_stress", "true" if effective else "false"]
+
+
+CASES["slip_effective"] = pore_pressure_case((P - DP) * TAN_PHI, True)
+CASES["slip_total"] = pore_pressure_case(P * TAN_PHI, False)
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("case,sigma_n", [("slip_effective", P - DP), ("slip_total", P)])
+def test_friction_acts_on_the_effective_normal_traction(runs, ranks, case, sigma_n):
+    """tau_L = (P - alpha dp) tan(phi) with the effective law: slip 0.3267949 m; the total law (dry fault)
+    keeps tau_L = P tan(phi): slip 0.2113249 m. The total normal traction is -P in both."""
+    s, f, _ = runs(case, ranks)
+    exact = DELTA - L * sigma_n * TAN_PHI / G
+    n = s["mesh"]["fault_faces"]
+    assert s["converged"]
+    assert (s["steps"][-1]["slip"], s["steps"][-1]["open"]) == (n, 0)
+    assert rel(f["slip_magnitude"], exact) <= 1e-8
+    assert rel(f["slip"][:, 2], exact) <= 1e-8
+    assert rel(f["traction_normal"], -P) <= 1e-8
+    eff = -(P - DP) if case == "slip_effective" else -P
+    assert rel(f["traction_normal_effective"], eff) <= 1e-8
+    assert rel(np.linalg.norm(f["traction_shear"], axis=1), sigma_n * TAN_PHI) <= 1e-8
+
+
+# ---------------------------------------------------------------------------------------------
 # Newton convergence once the active set has settled
 
 @pytest.mark.parametrize("ranks", [1, 2])

@@ -10,8 +10,8 @@ Conventions
 
 Lagrange multiplier rows (per face, area A), as in the stick/slip/open active-set method:
 - stick: r = A [g_N, g_T - g_T^n]           (closed, no incremental slip)
-- slip:  r = A [g_N, t_T - tau_L s]         s = dg_T/|dg_T|, dg_T = g_T - g_T^n
-         (before a slip increment exists, s = t_T/|t_T|: r_T = A t_T (1 - tau_L/|t_T|))
+- slip:  r = A [g_N, t_T - tau_L s]         s = q/|q|, q = t_T + c dg_T, dg_T = g_T - g_T^n, c = E/h
+         (augmented direction; the kernel also offers s = dg_T/|dg_T|)
 - open:  r = A t                              (traction-free)
 """
 
@@ -37,12 +37,18 @@ def coulomb_limit(t_n, cohesion, tan_phi):
     return np.maximum(cohesion - tan_phi * t_n, 0.0)
 
 
-def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_tol, slip_reg=None):
+def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_tol, slip_reg=None, c_aug=None):
     """Residual rows (nf,3) and their derivatives d r/d g_loc (nf,3,3), d r/d t (nf,3,3).
 
-    slip_reg (nf,) > 0 regularises the slip direction, s = dg_T / sqrt(|dg_T|^2 + eps^2): the slip law
-    stays differentiable where a face's slip increment is kinematically blocked (|dg_T| -> 0), at the
-    price of a traction below the limit for slips much smaller than eps."""
+    Slip direction: with c_aug (nf,) > 0 (a stiffness, Pa/m) the augmented direction
+    s = q/|q|, q = t_T + c dg_T (Alart-Curnier, Hueber-Wohlmuth): at a solution t_T = tau_L s and dg_T is
+    parallel to s, so it is the maximum-dissipation law, and it stays smooth while a face starts to slip
+    (|q| >= |t_T|); without c_aug, s = dg_T/|dg_T| (the traction's direction before any increment).
+    slip_reg (nf,) > 0 regularises the direction, s = q / sqrt(|q|^2 + (c eps)^2) (s = dg_T /
+    sqrt(|dg_T|^2 + eps^2) without c_aug), at the price of a traction below the limit for slips much
+    smaller than eps."""
+    if c_aug is not None:
+        return _lagrange_rows_augmented(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, c_aug, slip_reg)
     nf = len(area)
     r = np.zeros((nf, 3))
     dg = np.zeros((nf, 3, 3))
@@ -99,8 +105,43 @@ def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_to
     return r, dg, dt
 
 
+def _lagrange_rows_augmented(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, c, slip_reg=None):
+    nf = len(area)
+    r = np.zeros((nf, 3))
+    dg = np.zeros((nf, 3, 3))
+    dt = np.zeros((nf, 3, 3))
+    A = area
+    closed = state != OPEN
+    r[closed, 0] = A[closed] * g_loc[closed, 0]
+    dg[closed, 0, 0] = A[closed]
+    stick = state == STICK
+    r[stick, 1:] = A[stick, None] * (g_loc[stick, 1:] - g_prev_loc[stick, 1:])
+    dg[stick, 1, 1] = dg[stick, 2, 2] = A[stick]
+    i = np.nonzero(state == SLIP)[0]
+    if len(i):
+        tau = coulomb_limit(t[i, 0], cohesion[i], tan_phi[i])
+        dtau_dtn = np.where(cohesion[i] - tan_phi[i] * t[i, 0] > 0, -tan_phi[i], 0.0)
+        ci = c[i]
+        q = t[i, 1:] + ci[:, None] * (g_loc[i, 1:] - g_prev_loc[i, 1:])
+        eps2 = np.zeros(len(i)) if slip_reg is None else (ci * slip_reg[i]) ** 2
+        nrm = np.sqrt(np.einsum("ni,ni->n", q, q) + eps2)
+        safe = nrm > 1e-300
+        inv = np.where(safe, 1.0 / np.where(safe, nrm, 1.0), 0.0)
+        s = q * inv[:, None]
+        ds = (np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)) * inv[:, None, None]      # d s / d q
+        Ai = A[i]
+        r[i, 1:] = Ai[:, None] * (t[i, 1:] - tau[:, None] * s)
+        dt[i, 1:, 1:] = Ai[:, None, None] * (np.eye(2)[None] - tau[:, None, None] * ds)
+        dt[i, 1:, 0] = -Ai[:, None] * dtau_dtn[:, None] * s
+        dg[i, 1:, 1:] = -(Ai * tau * ci)[:, None, None] * ds
+    opn = state == OPEN
+    r[opn] = A[opn, None] * t[opn]
+    dt[opn] = A[opn, None, None] * np.eye(3)[None]
+    return r, dg, dt
+
+
 def update_states(state, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol, slip_tol_ratio,
-                  slip_to_stick=True):
+                  slip_to_stick=True, dg_t=None, c_aug=None):
     """Next active set from the converged solution of the current one (with hysteresis).
 
     open -> stick when the faces interpenetrate (g_N < -opening_tol);
@@ -119,7 +160,12 @@ def update_states(state, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol,
     tau = coulomb_limit(t[:, 0], cohesion, tan_phi)
     tt = np.linalg.norm(t[:, 1:], axis=1)
     new[rest & (state == STICK) & (tt > tau * (1 + slip_tol_ratio) + traction_tol * 1e-3)] = SLIP
-    if slip_to_stick:
+    if c_aug is not None and dg_t is not None:
+        # augmented slip law: |t_T| = tau_L on a slipping face; it sticks again when its slip increment
+        # turns against its traction (|t_T + c dg_T| < tau_L)
+        along = np.einsum("ni,ni->n", dg_t, t[:, 1:]) / np.maximum(tt, 1e-300)
+        new[rest & (state == SLIP) & (c_aug * along < -slip_tol_ratio * tau)] = STICK
+    elif slip_to_stick:
         new[rest & (state == SLIP) & (tt < tau * (1 - slip_tol_ratio))] = STICK
     return new
 

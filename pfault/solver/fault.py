@@ -145,9 +145,11 @@ class FaultSystem:
         self.kt = np.where(kt > 0, kt, kauto)
         self.slide_tol = 1e-10 * h
         self.slip_reg = np.zeros(nf)
+        self.c_slip = None                  # augmented slip direction stiffness (Pa/m) or None
         # state
         self.state = np.full(nf, ct.STICK)
         self.t0 = np.zeros((nf, 3))         # initial (prestress) traction, local; loads nothing
+        self.pn = np.zeros(nf)              # alpha p at the face: effective traction = t + (pn, 0, 0)
         self.g_prev = np.zeros((nf, 3))     # local jump at the start of the step
         self.t_prev = np.zeros((nf, 3))     # local traction at the start of the step
         # the faces' multipliers in serial order on every rank (stabilisation)
@@ -188,6 +190,26 @@ class FaultSystem:
 
     def tractions(self, x_loc):
         return x_loc[self.lm_dofs] if self.nf else np.zeros((0, 3))
+
+    def effective(self, t, idx=None):
+        """Effective tractions (Terzaghi) of all owned faces, or of faces ``idx``: the multiplier is the
+        total traction; friction and opening act on t_N + alpha p."""
+        te = np.array(t, dtype=float, copy=True)
+        te[:, 0] += self.pn if idx is None else self.pn[idx]
+        return te
+
+    def _c_slip(self, idx):
+        return None if self.c_slip is None else self.c_slip[idx]
+
+    def _state_args(self, idx, gl):
+        """Extra arguments of contact.update_states for faces idx (augmented slip law)."""
+        if self.c_slip is None:
+            return {"slip_to_stick": not np.any(self.slip_reg > 0)}
+        return {"dg_t": gl[idx, 1:] - self.g_prev[idx, 1:], "c_aug": self.c_slip[idx]}
+
+    def set_pore_pressure(self, alpha_p):
+        """alpha p (Pa, compression positive) at each owned face for the contact laws."""
+        self.pn = np.asarray(alpha_p, dtype=float).copy()
 
     def begin_step(self, x_loc):
         """Record the converged state at the start of a step; slipping faces restart from stick."""
@@ -275,9 +297,11 @@ class FaultSystem:
         d = np.zeros((self.nf, 3, 3))
         st = self.state.copy()
         if np.any(pen):
+            # the penalty law acts on the effective traction; the faces receive the total one
             t[pen], d[pen], st[pen] = ct.penalty_traction(gl[pen], self.g_prev[pen], self.t_prev[pen], self.kn[pen],
                                                           self.kt[pen], self.cohesion[pen], self.tan_phi[pen],
-                                                          self.t0[pen, 0])
+                                                          self.t0[pen, 0] + self.pn[pen])
+            t[pen, 0] -= self.pn[pen]
         return t, d, st
 
     def _stab_rows(self, t_all):
@@ -328,9 +352,10 @@ class FaultSystem:
         fu = self.sign[None, :] * np.tile(force, (1, 6)) * self.u_mask
         out += np.bincount(self.u_dofs.ravel(), weights=fu.ravel(), minlength=len(out))
         if self.has_lagrange and np.any(lag):
-            r, _, _ = ct.lagrange_rows(self.state[lag], self.area[lag], gl[lag], self.g_prev[lag], t[lag],
+            r, _, _ = ct.lagrange_rows(self.state[lag], self.area[lag], gl[lag], self.g_prev[lag],
+                                       self.effective(t[lag], lag),
                                        self.cohesion[lag], self.tan_phi[lag], self.slide_tol[lag],
-                                       self.slip_reg[lag])
+                                       self.slip_reg[lag], self._c_slip(lag))
             rs, _ = self._stab_rows(t_all)
             rr = np.zeros((self.nf, 3))
             rr[lag] = r
@@ -353,9 +378,10 @@ class FaultSystem:
                    * np.transpose(self.R[idx], (0, 2, 1))[:, None, :, :])                    # (n,6,3,3)
             blk = blk.reshape(len(idx), 18, 3) * self.u_mask[idx][:, :, None]
             J.setValuesRCV(self.g_u[idx], self.g_lm[idx], blk.reshape(len(idx), 54).copy(), addv=ADD)
-            r, dg, dt = ct.lagrange_rows(self.state[idx], self.area[idx], gl[idx], self.g_prev[idx], t,
+            r, dg, dt = ct.lagrange_rows(self.state[idx], self.area[idx], gl[idx], self.g_prev[idx],
+                                         self.effective(t, idx),
                                          self.cohesion[idx], self.tan_phi[idx], self.slide_tol[idx],
-                                         self.slip_reg[idx])
+                                         self.slip_reg[idx], self._c_slip(idx))
             # d r / d u = dr/dg_loc R (1/3) sign
             drdg = np.einsum("nij,njk->nik", dg, self.R[idx]) / 3.0                           # (n,3,3)
             blk = sign[None, None, :, None] * drdg[:, :, None, :]                              # (n,3,6,3)
@@ -399,9 +425,9 @@ class FaultSystem:
         opening_tol = self._opening_tol(opening_tol)[lag]
         old = self.state[lag]
         _, gl = self.jumps(x_loc)
-        t = self.tractions(x_loc)
+        t = self.effective(self.tractions(x_loc))
         new = ct.update_states(old, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
-                               opening_tol, slip_tol_ratio, slip_to_stick=not np.any(self.slip_reg > 0))
+                               opening_tol, slip_tol_ratio, **self._state_args(lag, gl))
         # a face kept closed by the anti-chatter rule while in tension cannot carry shear (tau_L = 0): it slips
         kept_closed = (new == ct.OPEN) & (((self.banned[lag] >> ct.OPEN) & 1) == 1) & (old != ct.OPEN)
         new = np.where(kept_closed, ct.SLIP, new)
@@ -436,7 +462,7 @@ class FaultSystem:
         """Faces kept in a state by the anti-chatter rule that the contact conditions reject, and the largest
         such violation relative to the fault's median normal traction (tension on a closed face, or the shear
         excess over the Coulomb limit). Returns (count, relative violation), the same on all ranks."""
-        t_all = self.tractions(x_loc)[self.lagrange] if self.has_lagrange else np.zeros((0, 3))
+        t_all = self.effective(self.tractions(x_loc))[self.lagrange] if self.has_lagrange else np.zeros((0, 3))
         tn_all = np.concatenate(self.mpi.allgather(np.abs(t_all[:, 0])))
         t_ref = max(float(np.median(tn_all)) if len(tn_all) else 0.0, traction_tol)
         lag = np.nonzero(self.lagrange & self.frozen)[0] if hasattr(self, "banned") else np.zeros(0, np.int64)
@@ -444,10 +470,9 @@ class FaultSystem:
         if len(lag):
             opening_tol = self._opening_tol(opening_tol)[lag]
             _, gl = self.jumps(x_loc)
-            t = self.tractions(x_loc)
+            t = self.effective(self.tractions(x_loc))
             new = ct.update_states(self.state[lag], t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag],
-                                   traction_tol, opening_tol, slip_tol_ratio,
-                                   slip_to_stick=not np.any(self.slip_reg > 0))
+                                   traction_tol, opening_tol, slip_tol_ratio, **self._state_args(lag, gl))
             kept_closed = (new == ct.OPEN) & (((self.banned[lag] >> ct.OPEN) & 1) == 1) & (self.state[lag] != ct.OPEN)
             viol = ((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1)) | (kept_closed & (t[lag][:, 0] > traction_tol))
             bad = int(np.count_nonzero(viol))

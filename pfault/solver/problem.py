@@ -124,6 +124,10 @@ class ElasticProblem:
 
     # -- loads -----------------------------------------------------------------------------------
     def cell_dp(self, t):
+        iv = getattr(self, "_dp_interval", None)
+        if iv is not None and iv[0] < t < iv[2]:
+            theta = (t - iv[0]) / (iv[2] - iv[0])
+            return (1.0 - theta) * iv[1] + theta * iv[3]
         return self.drawdown.cell_values(t, self.mesh.cell_material, self.asm.centroids)
 
     def set_load(self, t):
@@ -248,6 +252,8 @@ class FaultProblem(ElasticProblem):
         self.faults = FaultSystem(self.mesh, self.dofmap, self.fault_settings, fault_id, pairs, pair_S, materials,
                                   bc_local, self.dm.getLGMap())
         self.faults.slip_reg = self.contact_opts.get("slip_regularization", 0.0) * self.faults.h
+        if self.contact_opts.get("slip_direction", "increment") == "augmented":
+            self.faults.c_slip = self.faults.kt.copy()
         self.asm.add_stiffness(K0)
         self.faults.insert_pattern(K0)
         K0.assemble()
@@ -316,7 +322,27 @@ class FaultProblem(ElasticProblem):
         ksp.setUp()
         return snes
 
+    def face_pore_pressure(self, t):
+        """alpha p at the owned fault faces (Pa): the hydrostatic pressure below the water table at the face
+        centroid when the scene starts from the geostatic state, plus the change at time t (minus cell)."""
+        f = self.faults
+        if not self.contact_opts.get("effective_stress", True) or not f.nf:
+            return np.zeros(f.nf)
+        s = self.settings
+        p = np.zeros(f.nf)
+        if s.geostatic:
+            z = self.mesh.coords[f.verts][:, :, 2].mean(axis=1)
+            p += s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
+        if self.drawdown.active and t > 0:
+            p += self.cell_dp(t)[f.cell]
+        return self.asm.alpha[f.cell] * p
+
+    def set_load(self, t):
+        super().set_load(t)
+        self.faults.set_pore_pressure(self.face_pore_pressure(t))
+
     def geostatic_prestress(self, snes):
+        self.faults.set_pore_pressure(self.face_pore_pressure(0.0))
         sigma0 = super().geostatic_prestress(snes)
         # the faults carry the initial stress: their tractions start from it and only the change loads
         f = self.faults
@@ -371,6 +397,44 @@ class FaultProblem(ElasticProblem):
         self.is_u.compose("nearnullspace", self.u_nullspace)
         pc.setFieldSplitIS((DISPLACEMENT, self.is_u), (LAGRANGE, self.is_lm))
         return True
+
+    def solve_interval(self, snes, t_prev, t, max_cuts=0):
+        """Advance from t_prev to t; a step that does not converge is retried from the state at t_prev as
+        2, 4, ... equal sub-steps (up to max_cuts halvings). A flow model's pore pressure is interpolated
+        linearly in time within the interval (it has already been advanced to t)."""
+        u0 = self.u.duplicate()
+        self.u.copy(u0)
+        state0 = self.faults.state.copy()
+        flow = hasattr(self.drawdown, "advance_to") and self.drawdown.active
+        dp0 = self.cell_dp(t_prev) if (flow and max_cuts > 0) else None       # before the flow moves on to t
+        rec = self.solve_step(snes, t)
+        cuts = 0
+        tried = [rec]
+        while not rec["converged"] and cuts < max_cuts:
+            cuts += 1
+            n = 2 ** cuts
+            u0.copy(self.u)
+            self.faults.state = state0.copy()
+            self.faults._sync_state()
+            if flow:
+                self._dp_interval = (t_prev, dp0, t, self.cell_dp(t))
+            if self.contact_opts.get("monitor"):
+                PETSc.Sys.Print(f"  step not converged: retrying as {n} sub-steps")
+            for k in range(1, n + 1):
+                rec = self.solve_step(snes, t_prev + (t - t_prev) * k / n)
+                tried.append(rec)
+                if not rec["converged"]:
+                    break
+            self._dp_interval = None
+        u0.destroy()
+        if len(tried) > 1:
+            rec = dict(rec)
+            for key in ("newton_its", "ksp_its", "wall_s", "active_set_its"):
+                rec[key] = sum(r.get(key, 0) for r in tried)
+            rec["time_s"] = float(t)
+            rec["substeps"] = 2 ** cuts
+            rec["residual_history"] = [h for r in tried for h in r["residual_history"]]
+        return rec
 
     def solve_step(self, snes, t):
         """Newton solves until the active set settles; returns the step record."""
