@@ -47,8 +47,6 @@ def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_to
     slip_reg (nf,) > 0 regularises the direction, s = q / sqrt(|q|^2 + (c eps)^2) (s = dg_T /
     sqrt(|dg_T|^2 + eps^2) without c_aug), at the price of a traction below the limit for slips much
     smaller than eps."""
-    if c_aug is not None:
-        return _lagrange_rows_augmented(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, c_aug, slip_reg)
     nf = len(area)
     r = np.zeros((nf, 3))
     dg = np.zeros((nf, 3, 3))
@@ -61,83 +59,73 @@ def lagrange_rows(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, slide_to
     stick = state == STICK
     r[stick, 1:] = A[stick, None] * (g_loc[stick, 1:] - g_prev_loc[stick, 1:])
     dg[stick, 1, 1] = dg[stick, 2, 2] = A[stick]
-    slip = state == SLIP
-    if np.any(slip):
-        i = np.nonzero(slip)[0]
-        tau = coulomb_limit(t[i, 0], cohesion[i], tan_phi[i])
-        dtau_dtn = np.where(cohesion[i] - tan_phi[i] * t[i, 0] > 0, -tan_phi[i], 0.0)
-        d = g_loc[i, 1:] - g_prev_loc[i, 1:]
-        dn = np.linalg.norm(d, axis=1)
-        moving = dn > slide_tol[i]
-        # slip direction from the slip increment
-        j = i[moving]
-        if len(j):
-            eps2 = np.zeros(len(j)) if slip_reg is None else slip_reg[j] ** 2
-            dm = d[moving]
-            nrm = np.sqrt(dn[moving] ** 2 + eps2)
-            s = dm / nrm[:, None]
-            tm = tau[moving]
-            r[j, 1:] = A[j, None] * (t[j, 1:] - tm[:, None] * s)
-            dt[j, 1, 1] = dt[j, 2, 2] = A[j]
-            dt[j, 1:, 0] = -A[j, None] * dtau_dtn[moving, None] * s
-            ds = (np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)) / nrm[:, None, None]
-            dg[j, 1:, 1:] = -(A[j] * tm)[:, None, None] * ds
-        # no increment yet: slip along the traction
-        j = i[~moving]
-        if len(j):
-            tt = t[j, 1:]
-            tn = np.linalg.norm(tt, axis=1)
-            tm = tau[~moving]
-            safe = tn > 1e-300
-            inv = np.where(safe, 1.0 / np.where(safe, tn, 1.0), 0.0)
-            ratio = tm * inv
-            r[j, 1:] = A[j, None] * tt * (1.0 - ratio)[:, None]
-            eye = np.eye(2)[None]
-            unit_t = tt * inv[:, None]
-            outer = np.einsum("ni,nj->nij", unit_t, unit_t) * inv[:, None, None]
-            dtt = (1.0 - ratio)[:, None, None] * eye + np.where(safe, tm, 0.0)[:, None, None] * outer
-            dt[j, 1:, 1:] = A[j, None, None] * dtt
-            unit = np.where(safe[:, None], tt / np.where(safe, tn, 1.0)[:, None], 0.0)
-            dt[j, 1:, 0] = -A[j, None] * dtau_dtn[~moving, None] * unit
-    opn = state == OPEN
-    r[opn] = A[opn, None] * t[opn]
-    dt[opn] = A[opn, None, None] * np.eye(3)[None]
-    return r, dg, dt
-
-
-def _lagrange_rows_augmented(state, area, g_loc, g_prev_loc, t, cohesion, tan_phi, c, slip_reg=None):
-    nf = len(area)
-    r = np.zeros((nf, 3))
-    dg = np.zeros((nf, 3, 3))
-    dt = np.zeros((nf, 3, 3))
-    A = area
-    closed = state != OPEN
-    r[closed, 0] = A[closed] * g_loc[closed, 0]
-    dg[closed, 0, 0] = A[closed]
-    stick = state == STICK
-    r[stick, 1:] = A[stick, None] * (g_loc[stick, 1:] - g_prev_loc[stick, 1:])
-    dg[stick, 1, 1] = dg[stick, 2, 2] = A[stick]
     i = np.nonzero(state == SLIP)[0]
     if len(i):
+        # slip rows: A [t_T - tau_L s]; the two laws differ in the direction s
         tau = coulomb_limit(t[i, 0], cohesion[i], tan_phi[i])
         dtau_dtn = np.where(cohesion[i] - tan_phi[i] * t[i, 0] > 0, -tan_phi[i], 0.0)
-        ci = c[i]
-        q = t[i, 1:] + ci[:, None] * (g_loc[i, 1:] - g_prev_loc[i, 1:])
-        eps2 = np.zeros(len(i)) if slip_reg is None else (ci * slip_reg[i]) ** 2
-        nrm = np.sqrt(np.einsum("ni,ni->n", q, q) + eps2)
-        safe = nrm > 1e-300
-        inv = np.where(safe, 1.0 / np.where(safe, nrm, 1.0), 0.0)
-        s = q * inv[:, None]
-        ds = (np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)) * inv[:, None, None]      # d s / d q
-        Ai = A[i]
-        r[i, 1:] = Ai[:, None] * (t[i, 1:] - tau[:, None] * s)
-        dt[i, 1:, 1:] = Ai[:, None, None] * (np.eye(2)[None] - tau[:, None, None] * ds)
-        dt[i, 1:, 0] = -Ai[:, None] * dtau_dtn[:, None] * s
-        dg[i, 1:, 1:] = -(Ai * tau * ci)[:, None, None] * ds
+        if c_aug is not None:
+            _slip_rows_augmented(i, A, g_loc, g_prev_loc, t, tau, dtau_dtn, c_aug, slip_reg, r, dg, dt)
+        else:
+            _slip_rows_increment(i, A, g_loc, g_prev_loc, t, tau, dtau_dtn, slide_tol, slip_reg, r, dg, dt)
     opn = state == OPEN
     r[opn] = A[opn, None] * t[opn]
     dt[opn] = A[opn, None, None] * np.eye(3)[None]
     return r, dg, dt
+
+
+def _slip_rows_increment(i, A, g_loc, g_prev_loc, t, tau, dtau_dtn, slide_tol, slip_reg, r, dg, dt):
+    """Slip rows of faces i with s = dg_T/|dg_T| (the traction's direction before any increment)."""
+    d = g_loc[i, 1:] - g_prev_loc[i, 1:]
+    dn = np.linalg.norm(d, axis=1)
+    moving = dn > slide_tol[i]
+    # slip direction from the slip increment
+    j = i[moving]
+    if len(j):
+        eps2 = np.zeros(len(j)) if slip_reg is None else slip_reg[j] ** 2
+        dm = d[moving]
+        nrm = np.sqrt(dn[moving] ** 2 + eps2)
+        s = dm / nrm[:, None]
+        tm = tau[moving]
+        r[j, 1:] = A[j, None] * (t[j, 1:] - tm[:, None] * s)
+        dt[j, 1, 1] = dt[j, 2, 2] = A[j]
+        dt[j, 1:, 0] = -A[j, None] * dtau_dtn[moving, None] * s
+        ds = (np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)) / nrm[:, None, None]
+        dg[j, 1:, 1:] = -(A[j] * tm)[:, None, None] * ds
+    # no increment yet: slip along the traction
+    j = i[~moving]
+    if len(j):
+        tt = t[j, 1:]
+        tn = np.linalg.norm(tt, axis=1)
+        tm = tau[~moving]
+        safe = tn > 1e-300
+        inv = np.where(safe, 1.0 / np.where(safe, tn, 1.0), 0.0)
+        ratio = tm * inv
+        r[j, 1:] = A[j, None] * tt * (1.0 - ratio)[:, None]
+        eye = np.eye(2)[None]
+        unit_t = tt * inv[:, None]
+        outer = np.einsum("ni,nj->nij", unit_t, unit_t) * inv[:, None, None]
+        dtt = (1.0 - ratio)[:, None, None] * eye + np.where(safe, tm, 0.0)[:, None, None] * outer
+        dt[j, 1:, 1:] = A[j, None, None] * dtt
+        unit = np.where(safe[:, None], tt / np.where(safe, tn, 1.0)[:, None], 0.0)
+        dt[j, 1:, 0] = -A[j, None] * dtau_dtn[~moving, None] * unit
+
+
+def _slip_rows_augmented(i, A, g_loc, g_prev_loc, t, tau, dtau_dtn, c, slip_reg, r, dg, dt):
+    """Slip rows of faces i with the augmented direction s = q/|q|, q = t_T + c dg_T."""
+    ci = c[i]
+    q = t[i, 1:] + ci[:, None] * (g_loc[i, 1:] - g_prev_loc[i, 1:])
+    eps2 = np.zeros(len(i)) if slip_reg is None else (ci * slip_reg[i]) ** 2
+    nrm = np.sqrt(np.einsum("ni,ni->n", q, q) + eps2)
+    safe = nrm > 1e-300
+    inv = np.where(safe, 1.0 / np.where(safe, nrm, 1.0), 0.0)
+    s = q * inv[:, None]
+    ds = (np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)) * inv[:, None, None]      # d s / d q
+    Ai = A[i]
+    r[i, 1:] = Ai[:, None] * (t[i, 1:] - tau[:, None] * s)
+    dt[i, 1:, 1:] = Ai[:, None, None] * (np.eye(2)[None] - tau[:, None, None] * ds)
+    dt[i, 1:, 0] = -Ai[:, None] * dtau_dtn[:, None] * s
+    dg[i, 1:, 1:] = -(Ai * tau * ci)[:, None, None] * ds
 
 
 def update_states(state, t, g_loc, cohesion, tan_phi, traction_tol, opening_tol, slip_tol_ratio,

@@ -269,6 +269,7 @@ class FaultProblem(ElasticProblem):
 
     def _after_operator(self):
         self._jacobian_key = None
+        self._all_lagrange = self.comm.tompi4py().allreduce(bool(np.all(self.faults.lagrange)), op=MPI.LAND)
         self.J = self.K.duplicate(copy=True)
         self.J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         self.J.setNearNullSpace(self.nullspace)
@@ -297,8 +298,7 @@ class FaultProblem(ElasticProblem):
         # with every face stuck or open (no slip, no penalty face) the Jacobian depends on the configuration
         # only: an unchanged configuration leaves J untouched, and the PC keeps its factorisation
         f = self.faults
-        constant = not np.any(f.state_all == SLIP) and self.comm.tompi4py().allreduce(
-            bool(np.all(f.lagrange)), op=MPI.LAND)
+        constant = self._all_lagrange and not np.any(f.state_all == SLIP)
         key = f.state_all.copy()
         if constant and self._jacobian_key is not None and np.array_equal(key, self._jacobian_key):
             return
