@@ -23,18 +23,12 @@ import time
 import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
 from penny_mesh import crack_errors, make_penny_mesh, read_fault_step  # noqa: E402
+from pfault.study import mpi_env  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "penny_crack.opts")
-
-
-def environment():
-    env = dict(os.environ)
-    env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", OMPI_MCA_btl_vader_single_copy_mechanism="none")
-    if os.geteuid() == 0:
-        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    return env
 
 
 def run_pfault(mesh, out, ranks, extra=()):
@@ -42,7 +36,7 @@ def run_pfault(mesh, out, ranks, extra=()):
     if ranks > 1:
         cmd = ["mpirun", "-n", str(ranks), "--oversubscribe"] + cmd
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=REPO, env=environment(), capture_output=True, text=True)
+    proc = subprocess.run(cmd, cwd=REPO, env=mpi_env(), capture_output=True, text=True)
     wall = time.perf_counter() - t0
     summary = None
     if os.path.exists(os.path.join(out, "summary.json")):

@@ -7,18 +7,15 @@ import sys
 
 import pytest
 
+from pfault.study import mpi_env as study_mpi_env
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = sys.executable
 TIMEOUT = 600
 
 
 def mpi_env():
-    env = dict(os.environ)
-    env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", OMPI_MCA_btl_vader_single_copy_mechanism="none",
-               OMPI_MCA_rmaps_base_oversubscribe="1")
-    if os.geteuid() == 0:
-        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    return env
+    return study_mpi_env(oversubscribe=True)
 
 
 def command(args, ranks):

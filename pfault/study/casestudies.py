@@ -34,6 +34,7 @@ import time
 import numpy as np
 
 from . import figures as fg
+from . import mpi_env
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CASES = {
@@ -75,14 +76,6 @@ def run_name(case, solver="mumps", size_factor=1.0, tag=""):
     if float(size_factor) != 1.0:
         name += f"-f{float(size_factor):g}"
     return name
-
-
-def mpi_env():
-    env = dict(os.environ)
-    env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", OMPI_MCA_btl_vader_single_copy_mechanism="none")
-    if os.geteuid() == 0:
-        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    return env
 
 
 # ------------------------------------------------------------------------------------------------------
