@@ -121,9 +121,13 @@ SPECS = [
        "Coulomb limit) larger than this fraction of the fault's median normal traction; counts and the largest "
        "violation are in summary.json (frozen_violating, frozen_max_violation)"),
     _s("pfault_contact_slip_direction", "choice", "increment", "", "slip direction of slipping faces: "
-       "augmented, s = q/|q| with q = t_T + (E/h) dg_T (smooth while a face starts to slip); increment, "
+       "augmented, s = q/|q| with q = t_T + c dg_T (-pfault_contact_slip_augmentation; smooth while a face starts to slip); increment, "
        "s = dg_T/|dg_T| (needs -pfault_contact_slip_regularization where slip is kinematically blocked)",
        choices=("augmented", "increment")),
+    _s("pfault_contact_slip_augmentation", "quantity", 0.01, "", "augmented slip direction: c in q = t_T + c dg_T "
+       "as a fraction of E/h of the face's cell (the converged solution does not depend on it; smaller values "
+       "let the traction steer Newton while a face starts to slip: on Queretaro 0.01 needs 2.5x fewer "
+       "factorisations than 1)"),
     _s("pfault_contact_effective_stress", "bool", True, "", "friction and opening act on the effective normal "
        "traction t_N + alpha p (Terzaghi; p the pore pressure at the face: hydrostatic below the water table "
        "in a geostatic scene, plus the change); an open face carries the water pressure. false: on the total "
@@ -135,6 +139,12 @@ SPECS = [
     # solver
     _s("pfault_solver", "string", "", "", "solver options file: a name in config/solver (mumps, gamg, "
        "fieldsplit) or a path; its options apply where not set by the scene or the command line"),
+    _s("pfault_solver_reuse_factorization", "bool", True, "", "fault scenes with a direct factorisation "
+       "(-pc_type lu): a Newton iteration on an unchanged stick/slip/open configuration, after a Newton step "
+       "that cut the residual at least tenfold, keeps the last factorisation as the preconditioner of GMRES "
+       "on the exact Jacobian instead of refactoring (a new configuration, a slower contraction or a GMRES "
+       "solve that fails within -ksp_max_it refactor); false: refactor at every Newton iteration whose "
+       "Jacobian changed"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
     _s("pfault_geostatic_k0", "quantity", -1.0, "", "ratio of horizontal to vertical effective stress "
@@ -157,6 +167,15 @@ SPECS = [
     # time
     _s("pfault_time_end", "quantity", 1.0, "s", "end time (units allowed, e.g. 10*year)"),
     _s("pfault_time_steps", "int", 1, "", "number of equal time steps"),
+    _s("pfault_time_predictor", "bool", True, "", "fault scenes with the augmented slip direction: a step "
+       "starts from the last two converged states extrapolated linearly in time (displacements and "
+       "multipliers), and faces that slid by more than the slip regularisation in the last step start it "
+       "slipping; false (and always with the increment slip direction, singular at the zero increment an "
+       "overshooting prediction must return to when the loading stops): from the last state, slipping faces "
+       "stuck"),
+    _s("pfault_time_step_rtol", "quantity", 1e-10, "", "fault scenes: the Newton solves of a step stop once the "
+       "residual norm is below this fraction of its value at the start of the step (before that, at "
+       "-snes_rtol of each solve's initial residual or -snes_atol); 0: only -snes_rtol/-snes_atol"),
     _s("pfault_time_max_cuts", "int", 3, "", "a fault step that does not converge is retried as 2, 4, ... equal "
        "sub-steps, halving up to this many times (0: no retry); the pore pressure of a flow model is "
        "interpolated linearly in time between its steps"),

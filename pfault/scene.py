@@ -255,5 +255,9 @@ def read_contact_options(reader, materials, serial_extent):
             "monitor": reader.get("pfault_contact_monitor"),
             "effective_stress": reader.get("pfault_contact_effective_stress"),
             "slip_direction": reader.get("pfault_contact_slip_direction"),
+            "slip_augmentation": reader.get("pfault_contact_slip_augmentation"),
             "chatter_tol": reader.get("pfault_contact_chatter_tol"),
-            "slip_regularization": reader.get("pfault_contact_slip_regularization")}
+            "slip_regularization": reader.get("pfault_contact_slip_regularization"),
+            "reuse_factorization": reader.get("pfault_solver_reuse_factorization"),
+            "predictor": reader.get("pfault_time_predictor"),
+            "step_rtol": reader.get("pfault_time_step_rtol")}

@@ -303,7 +303,8 @@ class Simulation:
         if rec.get("substeps", 1) > 1:
             extra += f"  ({rec['substeps']} sub-steps)"
         _print(f"step {step:4d} t = {_fmt_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
-               f"ksp {rec['ksp_its']:4d}  wall {rec['wall_s']:7.2f} s{extra}"
+               f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
+               + f"  wall {rec['wall_s']:7.2f} s{extra}"
                + ("" if rec["converged"] else f"  NOT CONVERGED (reason {rec['reason']})"))
 
     def _finish(self, steps, converged):

@@ -55,6 +55,10 @@ CASES = {
 }
 
 
+# every Newton step solved exactly with a fresh factorisation, and Newton run to -snes_rtol
+EXACT_NEWTON = ("-pfault_solver_reuse_factorization", "false", "-pfault_time_step_rtol", "0")
+
+
 def read_fault(outdir):
     """Fault fields of the last step (per fault face, serial face order)."""
     import meshio
@@ -196,7 +200,8 @@ def test_friction_acts_on_the_effective_normal_traction(runs, ranks, case, sigma
 @pytest.mark.parametrize("ranks", [1, 2])
 @pytest.mark.parametrize("case", ["slip", "cohesion"])
 def test_newton_converges_quadratically_in_the_settled_active_set(runs, ranks, case):
-    """SNES residual norms of the last active-set iteration (the configuration no longer changes), direct solver.
+    """SNES residual norms of the last active-set iteration (the configuration no longer changes), direct solver
+    refactored at every Newton iteration (EXACT_NEWTON: no factorisation reuse, no step tolerance).
 
     Round-off: the norms bottom out at 2e-9..6e-9 N, i.e. (1..3)e-15 of R, the largest residual norm of the step
     (~1.9e6 N: the first solve from the stick configuration). Only pairs (r_k, r_k+1) with r_k > 1e-8 r_0 and
@@ -208,7 +213,7 @@ def test_newton_converges_quadratically_in_the_settled_active_set(runs, ranks, c
     measured value) separates quadratic from linear convergence; the order is asserted two-sided, 1.5..2.5 (one
     triple of norms lies above round-off: no tighter claim is honest).
     """
-    s, _, _ = runs(case, ranks)
+    s, _, _ = runs(case, ranks, EXACT_NEWTON)
     step = s["steps"][-1]
     assert step["active_set_settled"]
     big = max(max(h) for h in step["residual_history"])
@@ -395,3 +400,37 @@ def test_fieldsplit_solver_reaches_the_direct_solution(runs, case):
     for key in ("slip_magnitude", "opening", "traction_normal"):
         scale = max(np.abs(fd[key]).max(), 1e-3 if key != "traction_normal" else P)
         assert np.abs(fi[key] - fd[key]).max() <= 1e-7 * scale, key
+
+
+# ---------------------------------------------------------------------------------------------
+# time stepping: predictor and factorisation reuse, on a proportional loading in four steps
+
+RAMP = ["-pfault_time_steps", "4", "-pfault_contact_slip_direction", "augmented",
+        *[a for s in ("xmax", "top", "bottom") for a in (f"-pfault_bc_{s}_history", "0:0,1:1")]]
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_predictor_and_factorisation_reuse_on_a_proportional_loading(runs, ranks):
+    """All loads of the slip case ramp linearly over four steps, so the solution at time t is t times the final
+    one: slip t (delta - L tau_L / G). The three ways of stepping must give that slip at every step (1e-8):
+    - default (predictor + factorisation reuse): from step 2 on the linear extrapolation of the last two steps
+      is the solution, so the step takes one active-set round and one Newton iteration;
+    - without the predictor each step restarts from stick and needs further active-set rounds;
+    - without reuse (EXACT_NEWTON) every Newton iteration refactors, more factorisations than with reuse."""
+    exact = DELTA - L * P * TAN_PHI / G
+    variants = {"default": [], "no_predictor": ["-pfault_time_predictor", "false"],
+                "exact": ["-pfault_time_predictor", "false", *EXACT_NEWTON]}
+    steps = {}
+    for name, extra in variants.items():
+        s, _, _ = runs("slip", ranks, [*RAMP, *extra])
+        assert s["converged"], name
+        steps[name] = s["steps"][-4:]
+        for k, st in enumerate(steps[name], start=1):
+            assert abs(st["max_fault_slip_m"] - 0.25 * k * exact) <= 1e-8 * exact, (name, k, st["max_fault_slip_m"])
+    for st in steps["default"][1:]:
+        assert (st["active_set_its"], st["newton_its"]) == (1, 1), st
+    for st in steps["no_predictor"][1:]:
+        assert st["active_set_its"] >= 2, st
+    for a, b in zip(steps["no_predictor"], steps["exact"]):
+        assert b["factorizations"] >= b["newton_its"] - 1, b      # all but a first all-stick iteration
+        assert a["factorizations"] < b["factorizations"], (a["factorizations"], b["factorizations"])

@@ -44,6 +44,7 @@ class FakeProblem(FaultProblem):
         self.mesh = type("M", (), {"cells": np.zeros((2, 4), int), "cell_material": np.zeros(2, int)})()
         self.asm = type("A", (), {"centroids": np.zeros((2, 3))})()
         self.contact_opts = {}
+        self._last, self._t_state = None, 0.0      # predictor history (FaultProblem.create_snes)
         self.max_increment = max_increment
         self.calls = []
         self.t_done = 0.0

@@ -148,6 +148,7 @@ class FaultSystem:
         self.c_slip = None                  # augmented slip direction stiffness (Pa/m) or None
         # state
         self.state = np.full(nf, ct.STICK)
+        self.carried = np.zeros(nf, bool)  # slipping faces carried over from the last step (predictor)
         self.t0 = np.zeros((nf, 3))         # initial (prestress) traction, local; loads nothing
         self.pn = np.zeros(nf)              # alpha p at the face: effective traction = t + (pn, 0, 0)
         self.g_prev = np.zeros((nf, 3))     # local jump at the start of the step
@@ -205,14 +206,17 @@ class FaultSystem:
         """Extra arguments of contact.update_states for faces idx (augmented slip law)."""
         if self.c_slip is None:
             return {"slip_to_stick": not np.any(self.slip_reg > 0)}
-        return {"dg_t": gl[idx, 1:] - self.g_prev[idx, 1:], "c_aug": self.c_slip[idx]}
+        # the reversal test measures the backward slip on the face's own stiffness scale E/h, whatever the
+        # augmentation c of the slip direction
+        return {"dg_t": gl[idx, 1:] - self.g_prev[idx, 1:], "c_aug": self.kt[idx]}
 
     def set_pore_pressure(self, alpha_p):
         """alpha p (Pa, compression positive) at each owned face for the contact laws."""
         self.pn = np.asarray(alpha_p, dtype=float).copy()
 
-    def begin_step(self, x_loc):
-        """Record the converged state at the start of a step; slipping faces restart from stick."""
+    def begin_step(self, x_loc, carry=None):
+        """Record the converged state at the start of a step; slipping faces restart from stick, except those
+        in ``carry`` (owned faces still sliding, with a predicted slip increment), which stay slipping."""
         _, gl = self.jumps(x_loc)
         t_new = np.zeros((self.nf, 3))
         if self.has_lagrange:
@@ -223,7 +227,9 @@ class FaultSystem:
             t_new[pen] = tp[pen]
         self.g_prev = gl
         self.t_prev = t_new
-        self.state = np.where(self.state == ct.SLIP, ct.STICK, self.state)
+        carry = np.zeros(self.nf, bool) if carry is None else np.asarray(carry, bool)
+        self.state = np.where((self.state == ct.SLIP) & ~carry, ct.STICK, self.state)
+        self.carried = carry & (self.state == ct.SLIP)
         self.last_change = (np.zeros(0, np.int64), np.zeros(0, np.int64))
         self.visited = (1 << self.state).astype(np.int64)   # states each face has held in this step
         self.banned = np.zeros(self.nf, np.int64)            # states a face may not re-enter (it chattered)
@@ -428,6 +434,13 @@ class FaultSystem:
         t = self.effective(self.tractions(x_loc))
         new = ct.update_states(old, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
                                opening_tol, slip_tol_ratio, **self._state_args(lag, gl))
+        if self.c_slip is None and np.any(self.carried[lag]):
+            # a face carried over slipping from the last step sticks again once its slip increment is within
+            # the regularisation (it would have stayed stuck had it restarted from stick)
+            dgt = np.linalg.norm(gl[lag, 1:] - self.g_prev[lag, 1:], axis=1)
+            stop = self.carried[lag] & (old == ct.SLIP) & (new == ct.SLIP) & \
+                (dgt <= np.maximum(self.slip_reg[lag], self.slide_tol[lag]))
+            new = np.where(stop, ct.STICK, new)
         # a face kept closed by the anti-chatter rule while in tension cannot carry shear (tau_L = 0): it slips
         kept_closed = (new == ct.OPEN) & (((self.banned[lag] >> ct.OPEN) & 1) == 1) & (old != ct.OPEN)
         new = np.where(kept_closed, ct.SLIP, new)

@@ -12,6 +12,9 @@ from ..physics import elasticity as el
 from ..physics.contact import SLIP
 from .setup import apply_solver_defaults, rigid_body_modes
 
+# reuse mode: a Newton step that cut the residual by at least this factor lets the next one keep the factorisation
+REUSE_CONTRACTION = 0.1
+
 
 class ElasticProblem:
     """Linear elastic skeleton loaded by pore-pressure change, gravity/prestress and tractions."""
@@ -255,7 +258,7 @@ class FaultProblem(ElasticProblem):
                                   bc_local, self.dm.getLGMap())
         self.faults.slip_reg = self.contact_opts.get("slip_regularization", 0.0) * self.faults.h
         if self.contact_opts.get("slip_direction", "increment") == "augmented":
-            self.faults.c_slip = self.faults.kt.copy()
+            self.faults.c_slip = self.faults.kt * self.contact_opts.get("slip_augmentation", 0.01)
         self.asm.add_stiffness(K0)
         self.faults.insert_pattern(K0)
         K0.assemble()
@@ -307,13 +310,55 @@ class FaultProblem(ElasticProblem):
         x_loc = self.local_array(x)
         self.faults.add_jacobian(x_loc, self._lm_all(x_loc), self.J)
         self.J.assemble()
+        if self._reuse:
+            if self._refactor_needed(snes, key):
+                self.J.copy(self.P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+                self._factor_key = key
+                self._force_refactor = False
+                self.n_factorizations += 1
+            return
+        self.n_factorizations += 1
         if self.P is not self.J:
             self.J.copy(self.P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             self.faults.add_augmentation(self.P)
             self.P.assemble()
 
+    def _refactor_needed(self, snes, key):
+        """Whether this Newton iteration refactors (reuse mode): on a new stick/slip/open configuration, when
+        asked to (a GMRES solve on the reused factorisation failed), or when the last Newton step cut the
+        residual less than tenfold (the Jacobian is still moving); otherwise the last factorisation
+        preconditions GMRES on the exact Jacobian."""
+        if self._force_refactor or self._factor_key is None or not np.array_equal(key, self._factor_key):
+            return True
+        k = snes.getIterationNumber() if snes is not None else 0
+        if k == 0:
+            return False
+        hist = snes.getConvergenceHistory()[0]
+        if len(hist) <= k:
+            return True
+        return not hist[k] <= REUSE_CONTRACTION * hist[k - 1]
+
+    def _snes_solve(self, snes):
+        """snes.solve from self.u; a linear solve that fails on a reused factorisation is retried with a
+        fresh one (the Newton iterations of both attempts count)."""
+        its = kits = 0
+        hist = []
+        while True:
+            snes.setConvergenceHistory(reset=True)
+            snes.solve(None, self.u)
+            its += snes.getIterationNumber()
+            kits += snes.getLinearSolveIterations()
+            hist += [float(v) for v in snes.getConvergenceHistory()[0][:snes.getIterationNumber() + 1]]
+            reason = snes.getConvergedReason()
+            if not (self._reuse and reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
+                    and not self._force_refactor):
+                return reason, its, kits, hist
+            self._force_refactor = True
+            self.n_reuse_failures += 1
+
     def create_snes(self):
-        apply_solver_defaults(linear=False)
+        reuse = bool(self.contact_opts.get("reuse_factorization", False))
+        apply_solver_defaults(linear=False, reuse_factorization=reuse)
         snes = PETSc.SNES().create(comm=self.comm)
         snes.setDM(self.dm)
         snes.getKSP().setDMActive(False)
@@ -322,7 +367,21 @@ class FaultProblem(ElasticProblem):
         snes.setJacobian(self.jacobian, self.J, self.J)
         snes.setFromOptions()
         snes.setConvergenceHistory()
-        if self._configure_fieldsplit(snes.getKSP().getPC()):
+        ksp = snes.getKSP()
+        self._reuse = (reuse and ksp.getPC().getType() in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY)
+                       and ksp.getType() != PETSc.KSP.Type.PREONLY)
+        self._factor_key = None
+        self._force_refactor = False
+        self._atol0 = snes.getTolerances()[1]
+        self._last = None           # (u at the start of the last converged step, its start time, its end time)
+        self._t_state = 0.0         # time of the state in self.u
+        self.n_factorizations = 0
+        self.n_reuse_failures = 0
+        if self._reuse:
+            # the factorised matrix is a separate copy, refreshed only when _refactor_needed says so
+            self.P = self.J.duplicate(copy=True)
+            snes.setJacobian(self.jacobian, self.J, self.P)
+        elif self._configure_fieldsplit(snes.getKSP().getPC()):
             # Schur-complement fieldsplit preconditions with the augmented matrix (nonsingular displacement block)
             self.P = self.J.duplicate(copy=True)
             self.P.setNearNullSpace(self.nullspace)
@@ -417,6 +476,8 @@ class FaultProblem(ElasticProblem):
         u0 = self.u.duplicate()
         self.u.copy(u0)
         state0 = self.faults.state.copy()
+        last0 = None if self._last is None else (self._last[0].copy(), self._last[1], self._last[2])
+        t_state0 = self._t_state
         flow = hasattr(self.drawdown, "advance_to") and self.drawdown.active
         dp0 = self.cell_dp(t_prev) if (flow and max_cuts > 0) else None       # before the flow moves on to t
         rec = self.solve_step(snes, t)
@@ -428,6 +489,10 @@ class FaultProblem(ElasticProblem):
             u0.copy(self.u)
             self.faults.state = state0.copy()
             self.faults._sync_state()
+            if self._last is not None:
+                self._last[0].destroy()
+            self._last = None if last0 is None else (last0[0].copy(), last0[1], last0[2])
+            self._t_state = t_state0
             if flow:
                 self._dp_interval = (t_prev, dp0, t, self.cell_dp(t))
             if self.contact_opts.get("monitor"):
@@ -439,9 +504,11 @@ class FaultProblem(ElasticProblem):
                     break
             self._dp_interval = None
         u0.destroy()
+        if last0 is not None:
+            last0[0].destroy()
         if len(tried) > 1:
             rec = dict(rec)
-            for key in ("newton_its", "ksp_its", "wall_s", "active_set_its"):
+            for key in ("newton_its", "ksp_its", "wall_s", "active_set_its", "factorizations"):
                 rec[key] = sum(r.get(key, 0) for r in tried)
             rec["time_s"] = float(t)
             rec["substeps"] = 2 ** cuts
@@ -454,8 +521,16 @@ class FaultProblem(ElasticProblem):
         o = self.contact_opts
         self.set_load(t)
         x_loc = self.local_array(self.u)
-        self.faults.begin_step(x_loc)
         t0 = _time.perf_counter()
+        u_start = self.u.duplicate()
+        self.u.copy(u_start)
+        t_start = self._t_state
+        carry, du = self._predictor(t, x_loc)
+        self.faults.begin_step(x_loc, carry)
+        if du is not None:
+            self.u.axpy(1.0, du)
+            du.destroy()
+        self._step_tolerance(snes)
         newton = ksp = 0
         history = []
         settled = False
@@ -467,14 +542,12 @@ class FaultProblem(ElasticProblem):
         self.faults.save_state()
         fraction = 1.0
         last_changes = 0
+        nfact0 = self.n_factorizations
         for it in range(1, o["max_active_set_its"] + 1):
-            snes.setConvergenceHistory(reset=True)
-            snes.solve(None, self.u)
-            reason = snes.getConvergedReason()
-            its = snes.getIterationNumber()
+            reason, its, kits, hist = self._snes_solve(snes)
             newton += its
-            ksp += snes.getLinearSolveIterations()
-            history.append([float(v) for v in snes.getConvergenceHistory()[0][:its + 1]])
+            ksp += kits
+            history.append(hist)
             if reason > 0:
                 self.u.copy(x_conv)
                 self.faults.save_state()
@@ -513,6 +586,7 @@ class FaultProblem(ElasticProblem):
         counts = self.faults.counts_by_state(x_loc)
         rec = {"time_s": float(t), "newton_its": int(newton), "ksp_its": int(ksp),
                "wall_s": _time.perf_counter() - t0, "active_set_its": it, "active_set_settled": bool(settled),
+               "factorizations": int(self.n_factorizations - nfact0),
                "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
         rec.update(counts)
         rec["frozen_faces"] = self.faults.frozen_count()
@@ -525,7 +599,49 @@ class FaultProblem(ElasticProblem):
                              f"{worst:.3g} of the median normal traction (-pfault_contact_chatter_tol {o['chatter_tol']:g})")
         if converged and not settled:
             rec["reason"] = "active set did not settle"
+        if self._last is not None:
+            self._last[0].destroy()
+        self._last = (u_start, t_start, float(t)) if rec["converged"] else None
+        if not rec["converged"]:
+            u_start.destroy()
+        self._t_state = float(t)
         return rec
+
+    def _step_tolerance(self, snes):
+        """Newton solves of this step stop once |F| <= step_rtol |F(start of the step)| (or at the user's
+        -snes_atol / -snes_rtol, whichever comes first): the rounds after an active-set change are not held
+        to a tolerance relative to their own, much smaller, initial residual only."""
+        rtol_step = self.contact_opts.get("step_rtol", 0.0)
+        if rtol_step <= 0:
+            return
+        self.residual(snes, self.u, self.F)
+        f0 = self.F.norm()
+        rtol, _, stol, max_it = snes.getTolerances()
+        snes.setTolerances(rtol=rtol, atol=max(self._atol0, rtol_step * f0), stol=stol, max_it=max_it)
+
+    def _predictor(self, t, x_loc):
+        """First guess of a step from the last converged one (u_n + (t - t_n)/(t_n - t_n-1) (u_n - u_n-1),
+        displacements and multipliers) and the faces that keep slipping into it: those whose slip increment
+        in the last step exceeded the regularisation (augmented slip direction only). (None, None) without a
+        previous step."""
+        if (not self.contact_opts.get("predictor", True) or self._last is None
+                or self.faults.c_slip is None):
+            # not with the increment slip law: its direction is singular at a zero increment, which Newton
+            # must reach from an overshooting prediction when the loading stops
+            return None, None
+        u_prev, t_a, t_b = self._last
+        if not (t_b > t_a and t > t_b and t_b == self._t_state):
+            return None, None
+        du = self.u.duplicate()
+        self.u.copy(du)
+        du.axpy(-1.0, u_prev)
+        f = self.faults
+        _, g_now = f.jumps(x_loc)
+        _, g_before = f.jumps(self.local_array(u_prev))
+        slid = np.linalg.norm(g_now[:, 1:] - g_before[:, 1:], axis=1)
+        carry = (f.state == SLIP) & f.lagrange & (slid > np.maximum(f.slip_reg, f.slide_tol))
+        du.scale((t - t_b) / (t_b - t_a))
+        return carry, du
 
     def destroy(self):
         super().destroy()

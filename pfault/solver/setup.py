@@ -71,16 +71,29 @@ def apply_solver_file(name, scene_file=""):
     return path
 
 
-def apply_solver_defaults(linear=False):
+def is_direct():
+    """The options ask for a direct factorisation as the preconditioner (-pc_type lu or cholesky)."""
+    return PETSc.Options().getString("pc_type", "") in ("lu", "cholesky")
+
+
+def apply_solver_defaults(linear=False, reuse_factorization=False):
     """Code defaults, each only where the user is silent. A linear scene (no fault) needs one linear
-    solve per step: SNES type ksponly."""
+    solve per step: SNES type ksponly. With a direct factorisation the KSP is preonly, or GMRES when a
+    factorisation may be reused across Newton iterations (``reuse_factorization``)."""
     opts = PETSc.Options()
     if linear:
         set_default("snes_type", "ksponly")
     if not (opts.hasName("ksp_type") or opts.hasName("pc_type")):
-        set_default("ksp_type", "preonly")
         set_default("pc_type", "lu")
         set_default("pc_factor_mat_solver_type", "mumps")
+    if is_direct() and not opts.hasName("ksp_type"):
+        # a factorisation reused across Newton iterations preconditions GMRES on the exact Jacobian
+        set_default("ksp_type", "gmres" if reuse_factorization else "preonly")
+        if reuse_factorization:
+            # Eisenstat-Walker: GMRES on a reused factorisation solves only as far as Newton needs
+            set_default("ksp_rtol", "1e-9")
+            set_default("ksp_max_it", "12")
+            set_default("snes_ksp_ew", "true")
     set_default("snes_rtol", "1e-10")
     set_default("snes_atol", "1e-12")
     # a fault configuration Newton cannot solve in 25 iterations is abandoned for a bounded update
