@@ -434,3 +434,16 @@ def test_predictor_and_factorisation_reuse_on_a_proportional_loading(runs, ranks
     for a, b in zip(steps["no_predictor"], steps["exact"]):
         assert b["factorizations"] >= b["newton_its"] - 1, b      # all but a first all-stick iteration
         assert a["factorizations"] < b["factorizations"], (a["factorizations"], b["factorizations"])
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_a_gmres_failure_on_a_reused_factorisation_refactors(runs, ranks):
+    """With one GMRES iteration allowed, every Newton iteration that keeps the last factorisation fails its
+    linear solve; the step retries it with a fresh factorisation (one iteration then suffices) and must reach
+    the same slip as the default run."""
+    exact = DELTA - L * P * TAN_PHI / G
+    s, f, _ = runs("slip", ranks, ["-ksp_max_it", "1"])
+    assert s["converged"]
+    step = s["steps"][-1]
+    assert step["reuse_failures"] >= 1, step
+    assert rel(f["slip_magnitude"], exact) <= 1e-8

@@ -311,7 +311,8 @@ class FaultProblem(ElasticProblem):
         self.faults.add_jacobian(x_loc, self._lm_all(x_loc), self.J)
         self.J.assemble()
         if self._reuse:
-            if self._refactor_needed(snes, key):
+            self._reused = not self._refactor_needed(snes, key)
+            if not self._reused:
                 self.J.copy(self.P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
                 self._factor_key = key
                 self._force_refactor = False
@@ -350,8 +351,8 @@ class FaultProblem(ElasticProblem):
             kits += snes.getLinearSolveIterations()
             hist += [float(v) for v in snes.getConvergenceHistory()[0][:snes.getIterationNumber() + 1]]
             reason = snes.getConvergedReason()
-            if not (self._reuse and reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE
-                    and not self._force_refactor):
+            if not (self._reuse and reason == PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE and self._reused):
+                # (a linear solve that fails on a fresh factorisation is a genuine failure)
                 return reason, its, kits, hist
             self._force_refactor = True
             self.n_reuse_failures += 1
@@ -372,6 +373,7 @@ class FaultProblem(ElasticProblem):
                        and ksp.getType() != PETSc.KSP.Type.PREONLY)
         self._factor_key = None
         self._force_refactor = False
+        self._reused = False        # the last Newton iteration kept the factorisation (reuse mode)
         self._atol0 = snes.getTolerances()[1]
         self._last = None           # (u at the start of the last converged step, its start time, its end time)
         self._t_state = 0.0         # time of the state in self.u
@@ -542,7 +544,7 @@ class FaultProblem(ElasticProblem):
         self.faults.save_state()
         fraction = 1.0
         last_changes = 0
-        nfact0 = self.n_factorizations
+        nfact0, nfail0 = self.n_factorizations, self.n_reuse_failures
         for it in range(1, o["max_active_set_its"] + 1):
             reason, its, kits, hist = self._snes_solve(snes)
             newton += its
@@ -587,6 +589,7 @@ class FaultProblem(ElasticProblem):
         rec = {"time_s": float(t), "newton_its": int(newton), "ksp_its": int(ksp),
                "wall_s": _time.perf_counter() - t0, "active_set_its": it, "active_set_settled": bool(settled),
                "factorizations": int(self.n_factorizations - nfact0),
+               "reuse_failures": int(self.n_reuse_failures - nfail0),
                "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
         rec.update(counts)
         rec["frozen_faces"] = self.faults.frozen_count()

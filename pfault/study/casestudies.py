@@ -292,8 +292,8 @@ def results_table(runs, case):
 
 def timing_table(results):
     lines = ["| run | ranks | solver | dofs | mesh s | setup s | solve s | output s | total s (pfault) | "
-             "end to end s (mpirun) | CPU s / rank | mean load | Newton its | active-set its | exit |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "end to end s (mpirun) | CPU s / rank | mean load | Newton its | LU factorisations | active-set its | exit |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         s, d, w = r["summary"], r["driver"], r["summary"].get("wall_s", {})
         cpu = d.get("cpu_s")
@@ -301,7 +301,8 @@ def timing_table(results):
                      f"{_s(w.get('mesh'))} | {_s(w.get('setup'))} | {_s(w.get('solve'))} | {_s(w.get('output'))} | "
                      f"{_s(w.get('total'))} | {_s(d.get('wall_end_to_end_s'))} | "
                      f"{_s(cpu / s['ranks'] if cpu is not None else None)} | "
-                     f"{d.get('load_avg_1min_mean', float('nan')):.1f} | {r['newton_total']} | {r['active_set_total']} | "
+                     f"{d.get('load_avg_1min_mean', float('nan')):.1f} | {r['newton_total']} | "
+                     f"{sum(st.get('factorizations', 0) for st in s['steps'])} | {r['active_set_total']} | "
                      f"{d.get('exit_code', '?')} |")
     return "\n".join(lines)
 
@@ -327,12 +328,12 @@ def where_time_goes(r):
 def steps_table(r):
     steps = r["summary"]["steps"]
     flow = any("max_drawdown_m" in s for s in steps)
-    head = ("| step | t (yr) | Newton | KSP | active-set | stick/slip/open | wall s | subsidence m | opening cm | "
+    head = ("| step | t (yr) | Newton | KSP | LU | active-set | stick/slip/open | wall s | subsidence m | opening cm | "
             "slip cm |" + (" drawdown m |" if flow else ""))
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for i, s in enumerate(steps):
         row = (f"| {i} | {s['time_s'] / fg.YEAR:.3g} | {s.get('newton_its', 0)} | {s.get('ksp_its', 0)} | "
-               f"{s.get('active_set_its', '—')} | {s.get('stick', '—')}/{s.get('slip', '—')}/{s.get('open', '—')} | "
+               f"{s.get('factorizations', '—')} | {s.get('active_set_its', '—')} | {s.get('stick', '—')}/{s.get('slip', '—')}/{s.get('open', '—')} | "
                f"{s.get('wall_s', 0.0):.1f} | {s.get('max_subsidence_m', 0.0):.3g} | "
                f"{100.0 * s.get('max_fault_opening_m', 0.0):.3g} | {100.0 * s.get('max_fault_slip_m', 0.0):.3g} |")
         if flow:
@@ -507,17 +508,21 @@ def targets_text(results):
                    "iterations over the run, MUMPS).")
     out.append("")
     out.append(
-        "What stands between the Querétaro figure and its target: every Newton iteration on a configuration with "
-        "slipping faces refactors the saddle-point Jacobian (about 3.7 s at 212,634 dofs with PORD, the best of "
-        "PORD, AMF, AMD and QAMD measured on this matrix; BLR compression gave no gain; Debian's MUMPS has no "
-        "METIS or parallel ordering), and slip on a few hundred faces costs 13-16 Newton iterations per step. "
-        "Measured and not enough: a lagged factorisation as a GMRES preconditioner (19 factorisations instead of "
-        "49 at size factor 2 with the total-stress law, but 2,700 GMRES iterations at ~0.13 s each at paper size), the augmented slip "
-        "direction (-pfault_contact_slip_direction augmented: 53 Newton iterations instead of 57 at size factor 2) "
-        "and other line searches (no change). Steps whose faces only stick or open reuse the factorisation (one per "
-        "configuration: the Wuxi run is mostly such steps). The remaining lever is the linear solver: an "
-        "iterative Schur-complement solve whose displacement block is factored once (it does not change during a "
-        "run), or a MUMPS build with METIS.")
+        "How the Querétaro run gets there (paper size, 2 ranks, measured on this machine). A factorisation of the "
+        "212,634-dof saddle-point Jacobian costs 3.6 s with PORD (1.9e11 flops, ~50 Gflop/s over the two cores; "
+        "the best of PORD, AMF 5.1 s, AMD 7.4 s and QAMD 6.6 s; BLR gives no gain and Debian's MUMPS has no METIS "
+        "or parallel ordering; SuperLU_dist with METIS refactors in 7.4 s), a GMRES iteration on it 0.12 s. So the "
+        "run time is the number of factorisations. Refactoring at every Newton iteration with the increment slip "
+        "direction: 102 factorisations, 409 s. Reusing the factorisation as the GMRES preconditioner of the exact "
+        "Jacobian while the stick/slip/open configuration is unchanged and Newton contracts tenfold per step "
+        "(-pfault_solver_reuse_factorization, the default): 60 factorisations, 307 s. The rest is the slip "
+        "direction: with the increment law, a face that starts to slip has a direction singular at zero slip and "
+        "Newton needs 6-13 iterations per configuration (2-3 times slower contraction before the quadratic "
+        "phase); the augmented direction with c = 0.01 E/h (config/queretaro.opts) lets the traction steer it "
+        "and the predictor starts each step from the extrapolated state with the sliding faces still slipping: "
+        "the factorisations listed in the timing table above (c = E/h would need 2.5 times as many at size factor "
+        "2). The converged solution does not depend on the law (slip and subsidence agree to 1e-6 at size "
+        "factor 2). Wuxi is mostly steps whose faces stick, reusing one factorisation.")
     return "\n".join(out)
 
 
@@ -636,7 +641,7 @@ def main(argv=None):
                 print(f"case studies: wrote {p}", flush=True)
     if not args.no_readme:
         path = write_readme(all_results(args.runs_dir), os.path.join(args.runs_dir, "README.md"),
-                            ".venv/bin/python benchmarks/case_studies.py   # Wuxi ~15 s, calibrated Queretaro ~7 min; "
+                            ".venv/bin/python benchmarks/case_studies.py   # Wuxi ~15 s, calibrated Queretaro ~2.5 min; "
                             "the stated-rate Queretaro is slower")
         print(f"case studies: wrote {path}", flush=True)
     return int(status)
