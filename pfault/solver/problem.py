@@ -654,6 +654,9 @@ class FaultProblem(ElasticProblem):
         for name in ("is_u", "is_lm", "u_nullspace"):
             if hasattr(self, name):
                 getattr(self, name).destroy()
+        if getattr(self, "_last", None) is not None:
+            self._last[0].destroy()
+            self._last = None
 
 
 def _extend_pattern(K0, rows, cols):
