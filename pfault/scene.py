@@ -247,6 +247,12 @@ def read_contact_options(reader, materials, serial_extent):
     emax = max(m.young_modulus for m in materials)
     ttol = reader.get("pfault_contact_traction_tol")
     otol = reader.get("pfault_contact_opening_tol")
+    aug = reader.get("pfault_contact_slip_augmentation")
+    if not aug > 0:
+        raise InputError(f"-pfault_contact_slip_augmentation: must be positive (a fraction of E/h, e.g. 0.01), got {aug}")
+    srtol = reader.get("pfault_time_step_rtol")
+    if not 0 <= srtol < 1:
+        raise InputError(f"-pfault_time_step_rtol: must lie in [0, 1) (e.g. 1e-10; 0 switches it off), got {srtol}")
     return {"max_active_set_its": reader.get("pfault_contact_max_active_set_its"),
             "traction_tol": ttol if ttol >= 0 else 1e-8 * emax,
             "opening_tol": otol,
