@@ -148,7 +148,6 @@ class FaultSystem:
         self.c_slip = None                  # augmented slip direction stiffness (Pa/m) or None
         # state
         self.state = np.full(nf, ct.STICK)
-        self.carried = np.zeros(nf, bool)  # slipping faces carried over from the last step (predictor)
         self.t0 = np.zeros((nf, 3))         # initial (prestress) traction, local; loads nothing
         self.pn = np.zeros(nf)              # alpha p at the face: effective traction = t + (pn, 0, 0)
         self.g_prev = np.zeros((nf, 3))     # local jump at the start of the step
@@ -229,7 +228,6 @@ class FaultSystem:
         self.t_prev = t_new
         carry = np.zeros(self.nf, bool) if carry is None else np.asarray(carry, bool)
         self.state = np.where((self.state == ct.SLIP) & ~carry, ct.STICK, self.state)
-        self.carried = carry & (self.state == ct.SLIP)
         self.last_change = (np.zeros(0, np.int64), np.zeros(0, np.int64))
         self.visited = (1 << self.state).astype(np.int64)   # states each face has held in this step
         self.banned = np.zeros(self.nf, np.int64)            # states a face may not re-enter (it chattered)
@@ -434,16 +432,8 @@ class FaultSystem:
         t = self.effective(self.tractions(x_loc))
         new = ct.update_states(old, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
                                opening_tol, slip_tol_ratio, **self._state_args(lag, gl))
-        if self.c_slip is None and np.any(self.carried[lag]):
-            # a face carried over slipping from the last step sticks again once its slip increment is within
-            # the regularisation (it would have stayed stuck had it restarted from stick)
-            dgt = np.linalg.norm(gl[lag, 1:] - self.g_prev[lag, 1:], axis=1)
-            stop = self.carried[lag] & (old == ct.SLIP) & (new == ct.SLIP) & \
-                (dgt <= np.maximum(self.slip_reg[lag], self.slide_tol[lag]))
-            new = np.where(stop, ct.STICK, new)
         # a face kept closed by the anti-chatter rule while in tension cannot carry shear (tau_L = 0): it slips
-        kept_closed = (new == ct.OPEN) & (((self.banned[lag] >> ct.OPEN) & 1) == 1) & (old != ct.OPEN)
-        new = np.where(kept_closed, ct.SLIP, new)
+        new = np.where(self._kept_closed(lag, old, new), ct.SLIP, new)
         new = np.where((self.banned[lag] >> new) & 1 == 1, old, new)
         if fraction < 1.0:
             v = ct.violation(old, new, t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag], traction_tol,
@@ -467,6 +457,11 @@ class FaultSystem:
         self._sync_state()
         return self.mpi.allreduce(changed, op=MPI.SUM)
 
+    def _kept_closed(self, idx, old, new):
+        """Faces idx that ask to open (new) but are banned from opening while closed (old): the anti-chatter
+        rule keeps them closed."""
+        return (new == ct.OPEN) & (((self.banned[idx] >> ct.OPEN) & 1) == 1) & (old != ct.OPEN)
+
     def _opening_tol(self, tol):
         """Per-face interpenetration tolerance: the user's value, or 1e-6 of the face size."""
         return np.full(self.nf, tol) if tol >= 0 else 1e-6 * self.h
@@ -475,7 +470,8 @@ class FaultSystem:
         """Faces kept in a state by the anti-chatter rule that the contact conditions reject, and the largest
         such violation relative to the fault's median normal traction (tension on a closed face, or the shear
         excess over the Coulomb limit). Returns (count, relative violation), the same on all ranks."""
-        t_all = self.effective(self.tractions(x_loc))[self.lagrange] if self.has_lagrange else np.zeros((0, 3))
+        t = self.effective(self.tractions(x_loc))
+        t_all = t[self.lagrange] if self.has_lagrange else np.zeros((0, 3))
         tn_all = np.concatenate(self.mpi.allgather(np.abs(t_all[:, 0])))
         t_ref = max(float(np.median(tn_all)) if len(tn_all) else 0.0, traction_tol)
         lag = np.nonzero(self.lagrange & self.frozen)[0] if hasattr(self, "banned") else np.zeros(0, np.int64)
@@ -483,10 +479,9 @@ class FaultSystem:
         if len(lag):
             opening_tol = self._opening_tol(opening_tol)[lag]
             _, gl = self.jumps(x_loc)
-            t = self.effective(self.tractions(x_loc))
             new = ct.update_states(self.state[lag], t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag],
                                    traction_tol, opening_tol, slip_tol_ratio, **self._state_args(lag, gl))
-            kept_closed = (new == ct.OPEN) & (((self.banned[lag] >> ct.OPEN) & 1) == 1) & (self.state[lag] != ct.OPEN)
+            kept_closed = self._kept_closed(lag, self.state[lag], new)
             viol = ((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1)) | (kept_closed & (t[lag][:, 0] > traction_tol))
             bad = int(np.count_nonzero(viol))
             if bad:

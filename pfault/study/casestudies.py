@@ -400,6 +400,15 @@ def _variant(results, case, tag):
     return None
 
 
+def _finest(results, case, tag=""):
+    """The converged run of a case variant (``tag``; no extra options when untagged) on the finest mesh finer
+    than the paper's (size factor < 1), or None."""
+    finer = [r for r in results if _case_of(r) == case and r["converged"]
+             and (r["driver"] or {}).get("tag", "") == tag and (tag or not r["driver"].get("extra"))
+             and float(r["driver"].get("size_factor", 1.0)) < 1.0]
+    return min(finer, key=lambda r: float(r["driver"]["size_factor"])) if finer else None
+
+
 def discussion(results):
     """Paragraphs comparing pfault with the paper; the numbers come from the runs, the reasons are ours."""
     out = []
@@ -426,11 +435,8 @@ def discussion(results):
                 f"hydrostatic pore pressure acting on its faces) opens {100.0 * wt.get('open_fraction', 0.0):.0f} % "
                 f"of the fissure by up to {_m(wt['max_fault_opening_m'], 'cm')} (face average; "
                 f"{_m(wt.get('surface_opening_m'), 'cm')} at the surface).")
-            tfiner = [r for r in results if _case_of(r) == "wuxi" and r["converged"]
-                      and (r["driver"] or {}).get("tag") == "total"
-                      and float(r["driver"].get("size_factor", 1.0)) < 1.0]
-            if tfiner:
-                fr = min(tfiner, key=lambda r: float(r["driver"]["size_factor"]))
+            fr = _finest(results, "wuxi", "total")
+            if fr is not None:
                 text += (f" That opening is mesh-converged: {_m(fr['max_fault_opening_m'], 'cm')} (face average; "
                          f"{_m(fr.get('surface_opening_m'), 'cm')} at the surface) at size factor "
                          f"{float(fr['driver']['size_factor']):g}.")
@@ -442,10 +448,8 @@ def discussion(results):
             "of clay above the crest, one element deep, so the jump is pinned to zero 5 m below ground; (3) the "
             "geometry does not vary along the ridge here, the paper's does; (4) the geostatic start "
             "(K0 = nu/(1-nu)) puts a horizontal compression on the fissure that must be undone before a face opens.")
-        finer = [r for r in results if _case_of(r) == "wuxi" and r["converged"] and not r["driver"].get("tag")
-                 and not r["driver"].get("extra") and float(r["driver"].get("size_factor", 1.0)) < 1.0]
-        if finer:
-            fr = min(finer, key=lambda r: float(r["driver"]["size_factor"]))
+        fr = _finest(results, "wuxi")
+        if fr is not None:
             text += (
                 f" The opening is not mesh-converged: at size factor {float(fr['driver']['size_factor']):g} "
                 f"({fr['summary']['mesh']['nodes']:,} nodes) it is {_m(fr['max_fault_opening_m'], 'mm')} (face "
