@@ -14,6 +14,11 @@ from .setup import apply_solver_defaults, rigid_body_modes
 
 # reuse mode: a Newton step that cut the residual by at least this factor lets the next one keep the factorisation
 REUSE_CONTRACTION = 0.1
+# a Newton solve whose last STALL_ITS iterations cut the residual by less than STALL_FACTOR in all has stalled
+# (a slip direction at its regularisation kink, the line search taking tiny steps): it stops as if it had
+# reached -snes_max_it, and the active-set loop changes fewer faces instead of iterating on
+STALL_ITS = 5
+STALL_FACTOR = 0.5
 
 
 class ElasticProblem:
@@ -339,6 +344,36 @@ class FaultProblem(ElasticProblem):
             return True
         return not hist[k] <= REUSE_CONTRACTION * hist[k - 1]
 
+    def _converged(self, snes, its, norms):
+        """PETSc's default convergence test (SNESConvergedDefault: atol, rtol, stol, divergence tolerance,
+        function-count limit) plus a stall test: STALL_ITS iterations that cut |F| by less than STALL_FACTOR
+        end the solve with DIVERGED_MAX_IT."""
+        xnorm, ynorm, fnorm = norms
+        R = PETSc.SNES.ConvergedReason
+        rtol, atol, stol, _ = snes.getTolerances()
+        if its == 0:
+            self._fnorms = []
+        self._fnorms.append(fnorm)
+        f0 = self._fnorms[0]
+        if not np.isfinite(fnorm):
+            return R.DIVERGED_FNORM_NAN
+        if fnorm < atol:
+            return R.CONVERGED_FNORM_ABS
+        nmax = snes.getMaxFunctionEvaluations()
+        if nmax >= 0 and snes.getFunctionEvaluations() >= nmax:
+            return R.DIVERGED_FUNCTION_COUNT
+        if its:
+            if fnorm <= rtol * f0:
+                return R.CONVERGED_FNORM_RELATIVE
+            if ynorm < stol * xnorm:
+                return R.CONVERGED_SNORM_RELATIVE
+            if self._divtol > 0 and fnorm > self._divtol * f0:
+                return R.DIVERGED_DTOL
+            if its >= STALL_ITS and fnorm > STALL_FACTOR * self._fnorms[its - STALL_ITS]:
+                self.n_stalls += 1
+                return R.DIVERGED_MAX_IT
+        return R.CONVERGED_ITERATING
+
     def _snes_solve(self, snes):
         """snes.solve from self.u; a linear solve that fails on a reused factorisation is retried with a
         fresh one (the Newton iterations of both attempts count)."""
@@ -368,6 +403,10 @@ class FaultProblem(ElasticProblem):
         snes.setJacobian(self.jacobian, self.J, self.J)
         snes.setFromOptions()
         snes.setConvergenceHistory()
+        self._divtol = PETSc.Options().getReal("snes_divergence_tolerance", 1e4)
+        self._fnorms = []
+        self.n_stalls = 0
+        snes.setConvergenceTest(self._converged)
         ksp = snes.getKSP()
         self._reuse = (reuse and ksp.getPC().getType() in (PETSc.PC.Type.LU, PETSc.PC.Type.CHOLESKY)
                        and ksp.getType() != PETSc.KSP.Type.PREONLY)
@@ -510,7 +549,8 @@ class FaultProblem(ElasticProblem):
             last0[0].destroy()
         if len(tried) > 1:
             rec = dict(rec)
-            for key in ("newton_its", "ksp_its", "wall_s", "active_set_its", "factorizations"):
+            for key in ("newton_its", "ksp_its", "wall_s", "active_set_its", "factorizations", "reuse_failures",
+                        "newton_stalls"):
                 rec[key] = sum(r.get(key, 0) for r in tried)
             rec["time_s"] = float(t)
             rec["substeps"] = 2 ** cuts
@@ -544,8 +584,9 @@ class FaultProblem(ElasticProblem):
         self.faults.save_state()
         fraction = 1.0
         last_changes = 0
-        nfact0, nfail0 = self.n_factorizations, self.n_reuse_failures
+        nfact0, nfail0, nstall0 = self.n_factorizations, self.n_reuse_failures, self.n_stalls
         for it in range(1, o["max_active_set_its"] + 1):
+            nstall_round = self.n_stalls
             reason, its, kits, hist = self._snes_solve(snes)
             newton += its
             ksp += kits
@@ -573,7 +614,8 @@ class FaultProblem(ElasticProblem):
             last_changes = int(self.faults.last_transitions.sum() - np.trace(self.faults.last_transitions))
             if o.get("monitor"):
                 tr = self.faults.last_transitions
-                PETSc.Sys.Print(f"  active set {it:2d}: newton {its:2d} ({'converged' if reason > 0 else 'failed'}, "
+                status = "converged" if reason > 0 else ("stalled" if self.n_stalls > nstall_round else "failed")
+                PETSc.Sys.Print(f"  active set {it:2d}: newton {its:2d} ({status}, "
                                 f"|F| {history[-1][-1]:.3e})  stick->slip {tr[0, 1]}  slip->stick {tr[1, 0]}  "
                                 f"->open {tr[0, 2] + tr[1, 2]}  open->stick {tr[2, 0]}"
                                 + ("" if fraction == 1.0 else f"  (bounded update: {fraction:g})"))
@@ -590,6 +632,7 @@ class FaultProblem(ElasticProblem):
                "wall_s": _time.perf_counter() - t0, "active_set_its": it, "active_set_settled": bool(settled),
                "factorizations": int(self.n_factorizations - nfact0),
                "reuse_failures": int(self.n_reuse_failures - nfail0),
+               "newton_stalls": int(self.n_stalls - nstall0),
                "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
         rec.update(counts)
         rec["frozen_faces"] = self.faults.frozen_count()
