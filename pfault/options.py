@@ -132,6 +132,10 @@ SPECS = [
        "traction t_N + alpha p (Terzaghi; p the pore pressure at the face: hydrostatic below the water table "
        "in a geostatic scene, plus the change); an open face carries the water pressure. false: on the total "
        "traction (dry faults)"),
+    _s("pfault_contact_suction", "bool", False, "", "effective-stress law in a geostatic scene: false (default) "
+       "clamps the fault's pore pressure at zero, so a face above the lowered water table is dry (neither water "
+       "pressure nor suction acts on it); true keeps the negative pressure, whose suction then presses the "
+       "faces together"),
     _s("pfault_contact_monitor", "bool", False, "", "print one line per active-set update (Newton its, "
        "residual, state transitions)"),
     _s("pfault_contact_active_set_tol", "quantity", 0.0, "", "fraction of the fault area allowed to change "

@@ -260,6 +260,7 @@ def read_contact_options(reader, materials, serial_extent):
             "active_set_tol": reader.get("pfault_contact_active_set_tol"),
             "monitor": reader.get("pfault_contact_monitor"),
             "effective_stress": reader.get("pfault_contact_effective_stress"),
+            "suction": reader.get("pfault_contact_suction"),
             "slip_direction": reader.get("pfault_contact_slip_direction"),
             "slip_augmentation": reader.get("pfault_contact_slip_augmentation"),
             "chatter_tol": reader.get("pfault_contact_chatter_tol"),

@@ -194,6 +194,31 @@ def test_friction_acts_on_the_effective_normal_traction(runs, ranks, case, sigma
     assert rel(np.linalg.norm(f["traction_shear"], axis=1), sigma_n * TAN_PHI) <= 1e-8
 
 
+# the fault's pore pressure in a geostatic scene: hydrostatic below the water table, lowered by a head drawdown;
+# above the lowered water table a face is dry (pressure 0) unless -pfault_contact_suction keeps the negative value
+DRAWDOWN = 0.5                               # m of head, more than the depth of the upper fault faces
+RHO_G = 1000.0 * 9.80665                     # -pfault_water_density times -pfault_gravity (defaults)
+CASES["water_table"] = ["-pfault_bc_xmax_displacement", f"0,0,{DELTA_STICK!r}", *shear_tractions(TAU_STICK),
+                        "-pfault_geostatic", "true", "-pfault_water_table", "0",
+                        "-pfault_material_rock_head_drawdown", f"0:0,1:{DRAWDOWN!r}"]
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("suction", [False, True])
+def test_fault_pore_pressure_clamped_above_the_lowered_water_table(runs, ranks, suction):
+    """t_N,eff - t_N = alpha p with p = rho_w g (-z - drawdown) at the face centroid (alpha = 1): clamped at 0 by
+    default (faces at z = -1/6, -1/3 lie above the lowered water table at z = -0.5: dry), negative with
+    -pfault_contact_suction true; the faces below (z = -2/3, -5/6) carry p > 0 either way."""
+    from pfault.study import figures as fg
+    s, f, out = runs("water_table", ranks, ["-pfault_contact_suction", "true" if suction else "false"])
+    assert s["converged"]
+    fault = fg.read_fault(str(out))
+    _, _, cen = fg.face_geometry(fault.points, fault.cells)
+    p = RHO_G * (-cen[:, 2] - DRAWDOWN)
+    assert np.sum(p < 0) and np.sum(p > 0), "faces on both sides of the lowered water table"
+    expected = p if suction else np.maximum(p, 0.0)
+    got = fault.cell_data["traction_normal_effective"] - fault.cell_data["traction_normal"]
+    assert np.max(np.abs(got - expected)) <= 1e-9 * P
 # ---------------------------------------------------------------------------------------------
 # Newton convergence once the active set has settled
 

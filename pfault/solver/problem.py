@@ -436,7 +436,11 @@ class FaultProblem(ElasticProblem):
 
     def face_pore_pressure(self, t):
         """alpha p at the owned fault faces (Pa): the hydrostatic pressure below the water table at the face
-        centroid when the scene starts from the geostatic state, plus the change at time t (minus cell)."""
+        centroid when the scene starts from the geostatic state, plus the change at time t (minus cell).
+
+        In a geostatic scene p is the absolute pressure, and it is clamped at zero unless
+        ``-pfault_contact_suction``: a fault face above the lowered water table is dry. Without the geostatic
+        state p is only the change from an unknown initial pressure, and it is used as it is."""
         f = self.faults
         if not self.contact_opts.get("effective_stress", True) or not f.nf:
             return np.zeros(f.nf)
@@ -447,6 +451,8 @@ class FaultProblem(ElasticProblem):
             p += s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
         if self.drawdown.active and t > 0:
             p += self.cell_dp(t)[f.cell]
+        if s.geostatic and not self.contact_opts.get("suction", False):
+            p = np.maximum(p, 0.0)
         return self.asm.alpha[f.cell] * p
 
     def set_load(self, t):
