@@ -1,7 +1,8 @@
 """The fault problem's SNES convergence test (FaultProblem._converged, in-process): PETSc's default criteria
 (atol, rtol, stol, divergence) and the stall test, which ends a Newton solve whose last STALL_ITS iterations
 cut |F| by less than STALL_FACTOR in all (seen on Queretaro with the stated rates, where a face's slip
-direction sits at its regularisation kink and the line search takes tiny steps)."""
+direction sits at its regularisation kink and the line search takes tiny steps): accepted within STALL_ACCEPT
+times atol, a failure above."""
 
 import types
 
@@ -42,6 +43,14 @@ def test_a_stalled_newton_solve_stops_after_stall_its_iterations():
     # 0.2 % per iteration, as measured on the stalled Queretaro rounds: stops at iteration STALL_ITS
     fnorms = [876.0 * 0.998 ** k for k in range(25)]
     assert run(fnorms) == (pb.STALL_ITS, R.DIVERGED_MAX_IT, 1)
+
+
+def test_a_stall_within_stall_accept_atol_counts_as_converged():
+    # the same stall 5x above atol (1e-3): Newton sits on the floor of its nonsmooth residual, the solve is accepted
+    fnorms = [5e-3 * 0.998 ** k for k in range(25)]
+    assert run(fnorms) == (pb.STALL_ITS, R.CONVERGED_ITS, 1)
+    # and 20x above it is not
+    assert run([20.0 / 5.0 * f for f in fnorms]) == (pb.STALL_ITS, R.DIVERGED_MAX_IT, 1)
 
 
 def test_slow_but_steady_newton_is_not_a_stall():

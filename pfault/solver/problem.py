@@ -15,10 +15,12 @@ from .setup import apply_solver_defaults, rigid_body_modes
 # reuse mode: a Newton step that cut the residual by at least this factor lets the next one keep the factorisation
 REUSE_CONTRACTION = 0.1
 # a Newton solve whose last STALL_ITS iterations cut the residual by less than STALL_FACTOR in all has stalled
-# (a slip direction at its regularisation kink, the line search taking tiny steps): it stops as if it had
-# reached -snes_max_it, and the active-set loop changes fewer faces instead of iterating on
+# (a slip direction at its regularisation kink, the line search taking tiny steps). Within STALL_ACCEPT times
+# the absolute tolerance it counts as converged (CONVERGED_ITS): Newton sits on the floor of its nonsmooth
+# residual; above that it stops as if it had reached -snes_max_it, and the active-set loop changes fewer faces
 STALL_ITS = 5
 STALL_FACTOR = 0.5
+STALL_ACCEPT = 10.0
 
 
 class ElasticProblem:
@@ -347,7 +349,7 @@ class FaultProblem(ElasticProblem):
     def _converged(self, snes, its, norms):
         """PETSc's default convergence test (SNESConvergedDefault: atol, rtol, stol, divergence tolerance,
         function-count limit) plus a stall test: STALL_ITS iterations that cut |F| by less than STALL_FACTOR
-        end the solve with DIVERGED_MAX_IT."""
+        end the solve, with CONVERGED_ITS within STALL_ACCEPT atol, else with DIVERGED_MAX_IT."""
         xnorm, ynorm, fnorm = norms
         R = PETSc.SNES.ConvergedReason
         rtol, atol, stol, _ = snes.getTolerances()
@@ -371,7 +373,7 @@ class FaultProblem(ElasticProblem):
                 return R.DIVERGED_DTOL
             if its >= STALL_ITS and fnorm > STALL_FACTOR * self._fnorms[its - STALL_ITS]:
                 self.n_stalls += 1
-                return R.DIVERGED_MAX_IT
+                return R.CONVERGED_ITS if fnorm <= STALL_ACCEPT * atol else R.DIVERGED_MAX_IT
         return R.CONVERGED_ITERATING
 
     def _snes_solve(self, snes):
@@ -620,7 +622,7 @@ class FaultProblem(ElasticProblem):
             last_changes = int(self.faults.last_transitions.sum() - np.trace(self.faults.last_transitions))
             if o.get("monitor"):
                 tr = self.faults.last_transitions
-                status = "converged" if reason > 0 else ("stalled" if self.n_stalls > nstall_round else "failed")
+                status = ("converged" if reason > 0 else "failed") + (", stalled" if self.n_stalls > nstall_round else "")
                 PETSc.Sys.Print(f"  active set {it:2d}: newton {its:2d} ({status}, "
                                 f"|F| {history[-1][-1]:.3e})  stick->slip {tr[0, 1]}  slip->stick {tr[1, 0]}  "
                                 f"->open {tr[0, 2] + tr[1, 2]}  open->stick {tr[2, 0]}"
