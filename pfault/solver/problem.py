@@ -341,7 +341,7 @@ class FaultProblem(ElasticProblem):
         k = snes.getIterationNumber() if snes is not None else 0
         if k == 0:
             return False
-        hist = snes.getConvergenceHistory()[0]
+        hist = self._fnorms          # this solve's residual norms, recorded by the convergence test
         if len(hist) <= k:
             return True
         return not hist[k] <= REUSE_CONTRACTION * hist[k - 1]
@@ -622,7 +622,8 @@ class FaultProblem(ElasticProblem):
             last_changes = int(self.faults.last_transitions.sum() - np.trace(self.faults.last_transitions))
             if o.get("monitor"):
                 tr = self.faults.last_transitions
-                status = ("converged" if reason > 0 else "failed") + (", stalled" if self.n_stalls > nstall_round else "")
+                status = "converged" if reason > 0 else "failed"
+                status += ", stalled" if self.n_stalls > nstall_round else ""
                 PETSc.Sys.Print(f"  active set {it:2d}: newton {its:2d} ({status}, "
                                 f"|F| {history[-1][-1]:.3e})  stick->slip {tr[0, 1]}  slip->stick {tr[1, 0]}  "
                                 f"->open {tr[0, 2] + tr[1, 2]}  open->stick {tr[2, 0]}"

@@ -243,6 +243,13 @@ def _m(v, unit="m", digits=3):
     return f"{v:.{digits}g} m"
 
 
+def _face_and_surface(r, what, unit):
+    """'<face-average maximum> (face average; <nodal maximum at the land surface> at the surface)' of a run's fault
+    ``what`` (opening or slip)."""
+    return (f"{_m(r[f'max_fault_{what}_m'], unit)} (face average; {_m(r.get(f'surface_{what}_m'), unit)} at the "
+            "surface)")
+
+
 def _dev(got, paper):
     return f"{100.0 * (got / paper - 1.0):+.1f} %"
 
@@ -430,16 +437,14 @@ def discussion(results):
             "about 10 kPa (E times a strain of 1e-3).")
         fr = _finest(results, "wuxi")
         if fr is not None:
-            text += (f" The opening is mesh-converged: {_m(fr['max_fault_opening_m'], 'cm')} (face average; "
-                     f"{_m(fr.get('surface_opening_m'), 'cm')} at the surface) at size factor "
+            text += (f" The opening is mesh-converged: {_face_and_surface(fr, 'opening', 'cm')} at size factor "
                      f"{float(fr['driver']['size_factor']):g} ({fr['summary']['mesh']['nodes']:,} nodes).")
         ws = _variant(results, "wuxi", "suction")
         if ws is not None:
             text += (
                 f" Keeping the suction instead (`{os.path.basename(ws['dir'])}`, `-pfault_contact_suction true`: the "
                 "negative pore pressure above the lowered water table, down to -98 kPa at the surface, presses the "
-                f"faces together) the fissure hardly opens: {_m(ws['max_fault_opening_m'], 'mm')} (face average; "
-                f"{_m(ws.get('surface_opening_m'), 'mm')} at the surface), "
+                f"faces together) the fissure hardly opens: {_face_and_surface(ws, 'opening', 'mm')}, "
                 f"{100.0 * ws.get('open_fraction', 0.0):.1f} % of the faces.")
             frs = _finest(results, "wuxi", "suction")
             if frs is not None:
@@ -456,8 +461,8 @@ def discussion(results):
         if wst is not None:
             text += (
                 f" With flanks dipping 43 degrees (`{os.path.basename(wst['dir'])}`, "
-                f"`-pfault_wuxi_ridge_half_width 100`) the opening is {_m(wst['max_fault_opening_m'], 'cm')} (face "
-                f"average; {_m(wst.get('surface_opening_m'), 'cm')} at the surface), of the paper's order, for the "
+                f"`-pfault_wuxi_ridge_half_width 100`) the opening is {_face_and_surface(wst, 'opening', 'cm')}, "
+                "of the paper's order, for the "
                 f"same subsidence ({_m(wst['max_subsidence_m'])}) and a slip of "
                 f"{_m(wst['max_fault_slip_m'], 'mm')}.")
         text += (
@@ -489,10 +494,9 @@ def discussion(results):
                 f"({_m(qc['max_subsidence_m'])}, largest at the wells, on the sediment side) and the opening "
                 f"({_m(qc['max_fault_opening_m'], 'cm')} face average, {_m(qc.get('surface_opening_m'), 'cm')} at the "
                 "surface, paper < 3 cm) then agree with the paper, but the slip does not: "
-                f"{_m(qc['max_fault_slip_m'], 'cm')} (face average; {_m(qc.get('surface_slip_m'), 'cm')} at the "
-                "surface) instead of ~0.4 m. The soft clay next to the fault hangs on it: most of the offset between "
-                "rock and sediments is taken by shear of the first row of elements on the sediment side rather than "
-                "by slip, because the geostatic effective normal stress on the fault (K0 σ'v, growing further as the "
+                f"{_face_and_surface(qc, 'slip', 'cm')} instead of ~0.4 m. The soft clay next to the fault hangs "
+                "on it: most of the offset between rock and sediments is taken by shear of the first row of "
+                "elements on the sediment side rather than by slip, because the geostatic effective normal stress on the fault (K0 σ'v, growing further as the "
                 "pore pressure drops) gives it a frictional strength the drawdown-induced shear only partly "
                 "overcomes. Because that shear is carried by one row of elements, the slip depends on the mesh: "
                 "it falls as the mesh is refined (section \"Accuracy against cost\").")
