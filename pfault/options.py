@@ -65,7 +65,8 @@ SPECS = [
     _s("pfault_queretaro_clay_thickness", "quantity", 20.0, "m", "queretaro: clay aquitard thickness over "
        "the sand aquifer (down to 50 m)"),
     _s("pfault_queretaro_wells", "list", "12000,12000,12000,15000,12000,18000", "m", "queretaro: well "
-       "positions x1,y1,x2,y2,... in the aquifer; the mesh is refined around them"),
+       "positions x1,y1,x2,y2,... in the aquifer; the mesh is refined around them (default: -pfault_flow_wells "
+       "when given)"),
     _s("pfault_box_fault_planes", "names", "", "m", "internal surfaces of the box as name:axis:value, "
        "optionally limited to a rectangle name:axis:value:lo1:hi1:lo2:hi2 of the other two coordinates"),
     # materials

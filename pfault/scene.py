@@ -102,6 +102,9 @@ def generator_options(reader, settings):
     if settings.mesh_generator == "queretaro":
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_queretaro_{key}") for key in ("fault_x", "clay_thickness", "wells")}
+        if not reader.has("pfault_queretaro_wells") and reader.has("pfault_flow_wells"):
+            # refine where the flow model pumps
+            params["wells"] = reader.get("pfault_flow_wells")
         from .mesh.geometry import queretaro_mesh
         return lambda: queretaro_mesh(factor, **params)
     raise InputError(f"-pfault_mesh_generator {settings.mesh_generator}: this generator is not available yet; "

@@ -205,6 +205,9 @@ class _Reader:
     def __init__(self, values):
         self.values = values
 
+    def has(self, name):
+        return name in self.values
+
     def get(self, name):
         spec = spec_for(name)
         assert spec is not None, name
@@ -224,6 +227,13 @@ def test_scene_generators():
     m = build()
     x = m.points[np.unique(m.surfaces["fault"])]
     assert np.max(np.abs(x[:, 0] - 12000.0)) < 1e-6
+    # without -pfault_queretaro_wells the mesh is refined where the flow model pumps (-pfault_flow_wells)
+    far = _local_size(m, 25000.0, 5000.0, 3000.0)
+    assert _local_size(m, 20000.0, 20000.0, 300.0) < 0.25 * far
+    m = generator_options(_Reader({"pfault_mesh_size_factor": 4.0, "pfault_flow_wells": "20000,20000"}),
+                          settings)()
+    assert _local_size(m, 20000.0, 20000.0, 300.0) < 0.25 * far
+    assert _local_size(m, 12000.0, 15000.0, 1500.0) > 2.0 * _local_size(m, 20000.0, 20000.0, 300.0)
     settings = SimpleNamespace(mesh_file="", mesh_generator="wuxi")
     m = generator_options(_Reader({"pfault_mesh_size_factor": 5.0, "pfault_wuxi_crest_depth": 7.0}), settings)()
     assert np.min(m.points[np.unique(m.surfaces["fissure"]), 2]) == pytest.approx(-7.0, abs=1e-6)
