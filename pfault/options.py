@@ -139,6 +139,10 @@ SPECS = [
        "faces together"),
     _s("pfault_contact_monitor", "bool", False, "", "print one line per active-set update (Newton its, "
        "residual, state transitions)"),
+    _s("pfault_contact_bounded_growth", "quantity", 2.0, "", "after a Newton failure an active-set update "
+       "changes only a share of the faces asking for a change, those asking most (0.25, then 0.0625, ...); "
+       "each solved update multiplies that share by this factor, up to all faces (0: all at once right after "
+       "a success; 2 saves a third of the factorisations on a 43-degree Wuxi ridge)"),
     _s("pfault_contact_active_set_tol", "quantity", 0.0, "", "fraction of the fault area allowed to change "
        "state in the last active-set update of a settled step"),
     # solver

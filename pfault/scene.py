@@ -253,6 +253,10 @@ def read_contact_options(reader, materials, serial_extent):
     aug = reader.get("pfault_contact_slip_augmentation")
     if not aug > 0:
         raise InputError(f"-pfault_contact_slip_augmentation: must be positive (a fraction of E/h, e.g. 0.01), got {aug}")
+    growth = reader.get("pfault_contact_bounded_growth")
+    if not (growth == 0 or growth >= 1):
+        raise InputError(f"-pfault_contact_bounded_growth: must be 0 (all faces after a success) or at least 1 "
+                         f"(e.g. 2), got {growth}")
     srtol = reader.get("pfault_time_step_rtol")
     if not 0 <= srtol < 1:
         raise InputError(f"-pfault_time_step_rtol: must lie in [0, 1) (e.g. 1e-10; 0 switches it off), got {srtol}")
@@ -261,6 +265,7 @@ def read_contact_options(reader, materials, serial_extent):
             "opening_tol": otol,
             "slip_tol": reader.get("pfault_contact_slip_tol"),
             "active_set_tol": reader.get("pfault_contact_active_set_tol"),
+            "bounded_growth": reader.get("pfault_contact_bounded_growth"),
             "monitor": reader.get("pfault_contact_monitor"),
             "effective_stress": reader.get("pfault_contact_effective_stress"),
             "suction": reader.get("pfault_contact_suction"),
