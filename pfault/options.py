@@ -55,7 +55,7 @@ SPECS = [
        "surface; the fissure spans the surface down to it"),
     _s("pfault_wuxi_bedrock_depth", "quantity", 100.0, "m", "wuxi: depth of the bedrock top away from the "
        "ridge"),
-    _s("pfault_wuxi_ridge_half_width", "quantity", 500.0, "m", "wuxi: horizontal distance from the crest to "
+    _s("pfault_wuxi_ridge_half_width", "quantity", 100.0, "m", "wuxi: horizontal distance from the crest to "
        "the foot of each (planar) ridge flank"),
     _s("pfault_wuxi_interfaces", "list", "20,50,80", "m", "wuxi: depths of the interfaces between the "
        "Quaternary layers, alternately clay and sand from the top (clay 0-20, sand 20-50, clay 50-80, "

@@ -1,7 +1,7 @@
 """The active-set loop's bounded updates (FaultProblem.solve_step, -pfault_contact_bounded_growth).
 
-On a steep Wuxi ridge (flanks at 43 degrees, -pfault_wuxi_ridge_half_width 100) at mesh size factor 3, some
-active-set updates that open hundreds of fissure faces together with the stick->slip faces next to them are
+On the Wuxi ridge (flanks at 43 degrees, -pfault_wuxi_ridge_half_width 100, the default) at mesh size factor 3,
+some active-set updates that open hundreds of fissure faces together with the stick->slip faces next to them are
 more than Newton can solve: the loop goes back to the last solved configuration and changes a quarter of the
 faces asking for a change. After such a bounded update is solved, the share grows by the factor
 -pfault_contact_bounded_growth (default 2) instead of going back to all faces at once, which re-proposes the

@@ -69,8 +69,8 @@ def test_wuxi_fissure_is_conforming_on_its_plane(wuxi):
 def test_wuxi_volumes(wuxi):
     vols = material_volumes(wuxi)
     assert sum(vols.values()) == pytest.approx(WUXI_VOLUME, rel=1e-9)
-    # rock: 150 m slab plus the triangular ridge (base 1000 m, height 95 m) along 5 km
-    assert vols["rock"] == pytest.approx((2000.0 * 150.0 + 0.5 * 1000.0 * 95.0) * 5000.0, rel=1e-9)
+    # rock: 150 m slab plus the triangular ridge (base 200 m, height 95 m) along 5 km
+    assert vols["rock"] == pytest.approx((2000.0 * 150.0 + 0.5 * 200.0 * 95.0) * 5000.0, rel=1e-9)
     # the profile is the one documented
     rock = wuxi.tets[wuxi.cell_material == wuxi.material_names.index("rock")]
     c = wuxi.points[rock].mean(axis=1)

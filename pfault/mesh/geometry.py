@@ -34,7 +34,7 @@ WUXI_DEFAULTS = dict(
     ridge_x=1000.0,                  # x of the ridge crest line and of the fissure plane (m)
     crest_depth=5.0,                 # depth of the bedrock crest below the land surface (m)
     bedrock_depth=100.0,             # depth of the bedrock top away from the ridge (m)
-    ridge_half_width=500.0,          # horizontal distance from the crest to the foot of each flank (m)
+    ridge_half_width=100.0,          # horizontal distance from the crest to the foot of each flank (m)
     interfaces=(20.0, 50.0, 80.0),   # depths of the clay/sand interfaces above the bedrock (m)
 )
 # element sizes at size_factor 1: on the fissure and the crest line (m; 938 segments along y, i.e. 1876
@@ -224,10 +224,12 @@ def wuxi_mesh(size_factor=1.0, **params):
     Bedrock (material ``rock``): its top follows the piecewise-linear profile of
     :func:`wuxi_bedrock_top`: a crest at ``crest_depth`` (5 m) below the surface along the line
     x = ``ridge_x`` (1000 m), flanks dipping linearly to ``bedrock_depth`` (100 m) at a horizontal
-    distance ``ridge_half_width`` (500 m, a dip of about 11 degrees), flat beyond. This schematises the
+    distance ``ridge_half_width`` (100 m, a dip of about 43 degrees), flat beyond. This schematises the
     buried bedrock highs under the Quaternary cover of the Su-Xi-Chang plain: their shallowest points
     sit a few metres below ground, and the fissures open above them, where the compressible cover is
     thinnest and its thickness changes fastest. Planar flanks keep the geometry exact and easy to mesh.
+    The paper does not give its profile; the fissure's opening grows with the flank dip (about 5 cm for
+    500 m, 11 degrees, and 14 cm for the default 100 m, of the paper's ~0.2 m).
 
     Quaternary cover: horizontal layers, alternately clay (aquitards, material ``clay``) and sand
     (aquifers, material ``sand``) from the top, separated at the depths ``interfaces`` (default 20, 50,
