@@ -466,6 +466,8 @@ def discussion(results):
                     f" ({_m(frs['max_fault_opening_m'], 'cm')} at size factor "
                     f"{float(frs['driver']['size_factor']):g}): on this ridge the flanks' differential compaction "
                     "opens the fissure even against the suction.")
+            else:
+                text += "."
         text += (
             " Other likely differences: the geometry does not vary along the ridge here, and the fissure is one "
             "element deep, its jump pinned to zero on the crest 5 m below ground.")
