@@ -265,7 +265,7 @@ def read_contact_options(reader, materials, serial_extent):
             "opening_tol": otol,
             "slip_tol": reader.get("pfault_contact_slip_tol"),
             "active_set_tol": reader.get("pfault_contact_active_set_tol"),
-            "bounded_growth": reader.get("pfault_contact_bounded_growth"),
+            "bounded_growth": growth,
             "monitor": reader.get("pfault_contact_monitor"),
             "effective_stress": reader.get("pfault_contact_effective_stress"),
             "suction": reader.get("pfault_contact_suction"),

@@ -605,7 +605,7 @@ class FaultProblem(ElasticProblem):
                 # after a bounded update the share of faces changed grows back gradually: going back to all
                 # of them at once re-proposes the change that failed (a front of opening faces with the
                 # stick->slip ones next to it)
-                growth = o.get("bounded_growth", 0.0)
+                growth = o["bounded_growth"]
                 fraction = min(1.0, fraction * growth) if growth >= 1.0 else 1.0
             elif reason in (-5, -6):            # DIVERGED_MAX_IT, DIVERGED_LINE_SEARCH
                 # Newton could not solve this configuration: go back to the last solved one and change
