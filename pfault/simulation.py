@@ -302,6 +302,8 @@ class Simulation:
             extra += f"  opening {rec['max_fault_opening_m']:.3g} m  slip {rec['max_fault_slip_m']:.3g} m"
         if rec.get("substeps", 1) > 1:
             extra += f"  ({rec['substeps']} sub-steps)"
+        if rec.get("slip_direction_fallback"):
+            extra += "  (augmented slip direction failed: increment direction from here on)"
         _print(f"step {step:4d} t = {_fmt_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
                f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
                + f"  wall {rec['wall_s']:7.2f} s{extra}"
@@ -324,6 +326,9 @@ class Simulation:
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
             "converged": bool(converged),
         }
+        if getattr(self.problem, "slip_direction", None):
+            # the slip direction law in use at the end (an augmented one that failed is replaced for good)
+            self.summary["slip_direction"] = self.problem.slip_direction
         return self.summary
 
     def write_summary(self, total):

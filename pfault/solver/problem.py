@@ -264,7 +264,8 @@ class FaultProblem(ElasticProblem):
         self.faults = FaultSystem(self.mesh, self.dofmap, self.fault_settings, fault_id, pairs, pair_S, materials,
                                   bc_local, self.dm.getLGMap())
         self.faults.slip_reg = self.contact_opts.get("slip_regularization", 0.0) * self.faults.h
-        if self.contact_opts.get("slip_direction", "increment") == "augmented":
+        self.slip_direction = self.contact_opts.get("slip_direction", "increment")
+        if self.slip_direction == "augmented":
             self.faults.c_slip = self.faults.kt * self.contact_opts.get("slip_augmentation", 0.01)
         self.asm.add_stiffness(K0)
         self.faults.insert_pattern(K0)
@@ -519,9 +520,12 @@ class FaultProblem(ElasticProblem):
         return True
 
     def solve_interval(self, snes, t_prev, t, max_cuts=0):
-        """Advance from t_prev to t; a step that does not converge is retried from the state at t_prev as
-        2, 4, ... equal sub-steps (up to max_cuts halvings). A flow model's pore pressure is interpolated
-        linearly in time within the interval (it has already been advanced to t)."""
+        """Advance from t_prev to t. A step that does not converge is retried from the state at t_prev: with
+        the augmented slip direction, first in one step with the increment direction, which then stays for
+        the rest of the run (same solution, no traction steering: it settles where the augmented direction
+        chatters, e.g. on a fault that starts from zero strength without geostatic stress); then as 2, 4, ...
+        equal sub-steps (up to max_cuts halvings). A flow model's pore pressure is interpolated linearly in
+        time within the interval (it has already been advanced to t)."""
         u0 = self.u.duplicate()
         self.u.copy(u0)
         state0 = self.faults.state.copy()
@@ -529,12 +533,9 @@ class FaultProblem(ElasticProblem):
         t_state0 = self._t_state
         flow = hasattr(self.drawdown, "advance_to") and self.drawdown.active
         dp0 = self.cell_dp(t_prev) if (flow and max_cuts > 0) else None       # before the flow moves on to t
-        rec = self.solve_step(snes, t)
-        cuts = 0
-        tried = [rec]
-        while not rec["converged"] and cuts < max_cuts:
-            cuts += 1
-            n = 2 ** cuts
+        monitor = self.contact_opts.get("monitor")
+
+        def restart():
             u0.copy(self.u)
             self.faults.state = state0.copy()
             self.faults._sync_state()
@@ -542,9 +543,28 @@ class FaultProblem(ElasticProblem):
                 self._last[0].destroy()
             self._last = None if last0 is None else (last0[0].copy(), last0[1], last0[2])
             self._t_state = t_state0
+
+        rec = self.solve_step(snes, t)
+        tried = [rec]
+        fallback = False
+        c_slip = self.faults.c_slip
+        if not rec["converged"] and c_slip is not None:
+            restart()
+            if monitor:
+                PETSc.Sys.Print("  step not converged: retrying with the increment slip direction")
+            self.faults.c_slip = None
+            self.slip_direction = "increment"
+            rec = self.solve_step(snes, t)
+            tried.append(rec)
+            fallback = True
+        cuts = 0
+        while not rec["converged"] and cuts < max_cuts:
+            cuts += 1
+            n = 2 ** cuts
+            restart()
             if flow:
                 self._dp_interval = (t_prev, dp0, t, self.cell_dp(t))
-            if self.contact_opts.get("monitor"):
+            if monitor:
                 PETSc.Sys.Print(f"  step not converged: retrying as {n} sub-steps")
             for k in range(1, n + 1):
                 rec = self.solve_step(snes, t_prev + (t - t_prev) * k / n)
@@ -563,6 +583,8 @@ class FaultProblem(ElasticProblem):
             rec["time_s"] = float(t)
             rec["substeps"] = 2 ** cuts
             rec["residual_history"] = [h for r in tried for h in r["residual_history"]]
+        if fallback:
+            rec["slip_direction_fallback"] = True
         return rec
 
     def solve_step(self, snes, t):
