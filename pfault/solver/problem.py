@@ -551,7 +551,7 @@ class FaultProblem(ElasticProblem):
         if not rec["converged"] and c_slip is not None:
             restart()
             if monitor:
-                PETSc.Sys.Print("  step not converged: retrying with the increment slip direction")
+                PETSc.Sys.Print(f"  step not converged ({rec['reason']}): retrying with the increment slip direction")
             self.faults.c_slip = None
             self.slip_direction = "increment"
             rec = self.solve_step(snes, t)
@@ -565,7 +565,7 @@ class FaultProblem(ElasticProblem):
             if flow:
                 self._dp_interval = (t_prev, dp0, t, self.cell_dp(t))
             if monitor:
-                PETSc.Sys.Print(f"  step not converged: retrying as {n} sub-steps")
+                PETSc.Sys.Print(f"  step not converged ({rec['reason']}): retrying as {n} sub-steps")
             for k in range(1, n + 1):
                 rec = self.solve_step(snes, t_prev + (t - t_prev) * k / n)
                 tried.append(rec)
