@@ -122,7 +122,8 @@ SPECS = [
        "Coulomb limit) larger than this fraction of the fault's median normal traction; counts and the largest "
        "violation are in summary.json (frozen_violating, frozen_max_violation)"),
     _s("pfault_contact_slip_direction", "choice", "increment", "", "slip direction of slipping faces: "
-       "augmented, s = q/|q| with q = t_T + c dg_T (-pfault_contact_slip_augmentation; smooth while a face starts to slip); increment, "
+       "augmented, s = q/|q| with q = t_T + c dg_T (-pfault_contact_slip_augmentation; smooth while a face starts to slip; "
+       "a step it cannot solve is redone with increment, kept for the rest of the run); increment, "
        "s = dg_T/|dg_T| (needs -pfault_contact_slip_regularization where slip is kinematically blocked)",
        choices=("augmented", "increment")),
     _s("pfault_contact_slip_augmentation", "quantity", 0.01, "", "augmented slip direction: c in q = t_T + c dg_T "
@@ -187,7 +188,8 @@ SPECS = [
        "-snes_rtol of each solve's initial residual or -snes_atol); 0: only -snes_rtol/-snes_atol"),
     _s("pfault_time_max_cuts", "int", 3, "", "a fault step that does not converge is retried as 2, 4, ... equal "
        "sub-steps, halving up to this many times (0: no retry); the pore pressure of a flow model is "
-       "interpolated linearly in time between its steps"),
+       "interpolated linearly in time between its steps (with the augmented slip direction the step is first "
+       "redone with the increment direction, which then stays)"),
 ]
 
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")
