@@ -270,7 +270,7 @@ def read_contact_options(reader, materials, serial_extent):
             "effective_stress": reader.get("pfault_contact_effective_stress"),
             "suction": reader.get("pfault_contact_suction"),
             "slip_direction": reader.get("pfault_contact_slip_direction"),
-            "slip_augmentation": reader.get("pfault_contact_slip_augmentation"),
+            "slip_augmentation": aug,
             "chatter_tol": reader.get("pfault_contact_chatter_tol"),
             "slip_regularization": reader.get("pfault_contact_slip_regularization"),
             "reuse_factorization": reader.get("pfault_solver_reuse_factorization"),

@@ -43,12 +43,11 @@ class FakeProblem(FaultProblem):
         self.u = PETSc.Vec().createSeq(3)
         self.u.set(1.0)
         self.faults = FakeFaults(np.ones(3) if augmented else None)
-        self.slip_direction = "augmented" if augmented else "increment"
         self.augmented_solves = augmented_solves
         self.drawdown = FakeFlow()
         self.mesh = type("M", (), {"cells": np.zeros((2, 4), int), "cell_material": np.zeros(2, int)})()
         self.asm = type("A", (), {"centroids": np.zeros((2, 3))})()
-        self.contact_opts = {}
+        self.contact_opts = {"monitor": False}
         self._last, self._t_state = None, 0.0      # predictor history (FaultProblem.create_snes)
         self.max_increment = max_increment
         self.calls = []

@@ -263,10 +263,9 @@ class FaultProblem(ElasticProblem):
         bc_local = self._constrained_local()
         self.faults = FaultSystem(self.mesh, self.dofmap, self.fault_settings, fault_id, pairs, pair_S, materials,
                                   bc_local, self.dm.getLGMap())
-        self.faults.slip_reg = self.contact_opts.get("slip_regularization", 0.0) * self.faults.h
-        self.slip_direction = self.contact_opts.get("slip_direction", "increment")
-        if self.slip_direction == "augmented":
-            self.faults.c_slip = self.faults.kt * self.contact_opts.get("slip_augmentation", 0.01)
+        self.faults.slip_reg = self.contact_opts["slip_regularization"] * self.faults.h
+        if self.contact_opts["slip_direction"] == "augmented":
+            self.faults.c_slip = self.faults.kt * self.contact_opts["slip_augmentation"]
         self.asm.add_stiffness(K0)
         self.faults.insert_pattern(K0)
         K0.assemble()
@@ -277,6 +276,11 @@ class FaultProblem(ElasticProblem):
         else:
             K = K0
         return K
+
+    @property
+    def slip_direction(self):
+        """The slip direction law in use: augmented (faults.c_slip set) or increment."""
+        return "increment" if self.faults.c_slip is None else "augmented"
 
     def _after_operator(self):
         self._jacobian_key = None
@@ -396,7 +400,7 @@ class FaultProblem(ElasticProblem):
             self.n_reuse_failures += 1
 
     def create_snes(self):
-        reuse = bool(self.contact_opts.get("reuse_factorization", False))
+        reuse = bool(self.contact_opts["reuse_factorization"])
         apply_solver_defaults(linear=False, reuse_factorization=reuse)
         snes = PETSc.SNES().create(comm=self.comm)
         snes.setDM(self.dm)
@@ -445,7 +449,7 @@ class FaultProblem(ElasticProblem):
         ``-pfault_contact_suction``: a fault face above the lowered water table is dry. Without the geostatic
         state p is only the change from an unknown initial pressure, and it is used as it is."""
         f = self.faults
-        if not self.contact_opts.get("effective_stress", True) or not f.nf:
+        if not self.contact_opts["effective_stress"] or not f.nf:
             return np.zeros(f.nf)
         s = self.settings
         p = np.zeros(f.nf)
@@ -454,7 +458,7 @@ class FaultProblem(ElasticProblem):
             p += s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
         if self.drawdown.active and t > 0:
             p += self.cell_dp(t)[f.cell]
-        if s.geostatic and not self.contact_opts.get("suction", False):
+        if s.geostatic and not self.contact_opts["suction"]:
             p = np.maximum(p, 0.0)
         return self.asm.alpha[f.cell] * p
 
@@ -533,7 +537,7 @@ class FaultProblem(ElasticProblem):
         t_state0 = self._t_state
         flow = hasattr(self.drawdown, "advance_to") and self.drawdown.active
         dp0 = self.cell_dp(t_prev) if (flow and max_cuts > 0) else None       # before the flow moves on to t
-        monitor = self.contact_opts.get("monitor")
+        monitor = self.contact_opts["monitor"]
 
         def restart():
             u0.copy(self.u)
@@ -547,13 +551,11 @@ class FaultProblem(ElasticProblem):
         rec = self.solve_step(snes, t)
         tried = [rec]
         fallback = False
-        c_slip = self.faults.c_slip
-        if not rec["converged"] and c_slip is not None:
+        if not rec["converged"] and self.faults.c_slip is not None:
             restart()
             if monitor:
                 PETSc.Sys.Print(f"  step not converged ({rec['reason']}): retrying with the increment slip direction")
             self.faults.c_slip = None
-            self.slip_direction = "increment"
             rec = self.solve_step(snes, t)
             tried.append(rec)
             fallback = True
@@ -646,7 +648,7 @@ class FaultProblem(ElasticProblem):
             changed = self.faults.update_active_set(x_loc, o["traction_tol"], o["opening_tol"], o["slip_tol"],
                                                     fraction)
             last_changes = int(self.faults.last_transitions.sum() - np.trace(self.faults.last_transitions))
-            if o.get("monitor"):
+            if o["monitor"]:
                 tr = self.faults.last_transitions
                 status = "converged" if reason > 0 else "failed"
                 status += ", stalled" if self.n_stalls > nstall_round else ""
@@ -692,7 +694,7 @@ class FaultProblem(ElasticProblem):
         """Newton solves of this step stop once |F| <= step_rtol |F(start of the step)| (or at the user's
         -snes_atol / -snes_rtol, whichever comes first): the rounds after an active-set change are not held
         to a tolerance relative to their own, much smaller, initial residual only."""
-        rtol_step = self.contact_opts.get("step_rtol", 0.0)
+        rtol_step = self.contact_opts["step_rtol"]
         if rtol_step <= 0:
             return
         self.residual(snes, self.u, self.F)
@@ -705,7 +707,7 @@ class FaultProblem(ElasticProblem):
         displacements and multipliers) and the faces that keep slipping into it: those whose slip increment
         in the last step exceeded the regularisation (augmented slip direction only). (None, None) without a
         previous step."""
-        if (not self.contact_opts.get("predictor", True) or self._last is None
+        if (not self.contact_opts["predictor"] or self._last is None
                 or self.faults.c_slip is None):
             # not with the increment slip law: its direction is singular at a zero increment, which Newton
             # must reach from an overshooting prediction when the loading stops

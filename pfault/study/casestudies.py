@@ -519,8 +519,8 @@ def discussion(results):
         qn = _variant(results, "queretaro_calibrated", "nogeostatic", any_size=True)
         if qn is not None:
             f_n = float(qn["driver"].get("size_factor", 1.0))
-            same = [r for r in results if _case_of(r) == "queretaro_calibrated" and r["converged"]
-                    and not (r["driver"] or {}).get("tag") and float(r["driver"].get("size_factor", 1.0)) == f_n]
+            base_name = run_name("queretaro_calibrated", size_factor=f_n)
+            same = [r for r in results if os.path.basename(r["dir"]) == base_name and r["converged"]]
             at = "" if f_n == 1.0 else f" at size factor {f_n:g}"
             steps_n = [st for st in qn["summary"]["steps"] if st.get("time_s", 0) > 0]
             fb_step = next((k + 1 for k, st in enumerate(steps_n) if st.get("slip_direction_fallback")), "—")
