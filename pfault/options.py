@@ -121,6 +121,10 @@ SPECS = [
        "kept in one; the step fails if that leaves a violation (tension on a closed face, or shear above the "
        "Coulomb limit) larger than this fraction of the fault's median normal traction; counts and the largest "
        "violation are in summary.json (frozen_violating, frozen_max_violation)"),
+    _s("pfault_contact_chatter_releases", "int", 2, "", "a step that settles with faces held by the "
+       "anti-chatter rule in a state violating the contact conditions by more than -pfault_contact_chatter_tol "
+       "releases those faces (they may change state again) and goes on with its active-set updates, up to this "
+       "many times; then the step fails and is retried (0: fail at once)"),
     _s("pfault_contact_slip_direction", "choice", "increment", "", "slip direction of slipping faces: "
        "augmented, s = q/|q| with q = t_T + c dg_T (-pfault_contact_slip_augmentation; smooth while a face starts to slip; "
        "a step it cannot solve is redone with increment, kept for the rest of the run); increment, "

@@ -257,6 +257,9 @@ def read_contact_options(reader, materials, serial_extent):
     if not (growth == 0 or growth >= 1):
         raise InputError(f"-pfault_contact_bounded_growth: must be 0 (all faces after a success) or at least 1 "
                          f"(e.g. 2), got {growth}")
+    releases = reader.get("pfault_contact_chatter_releases")
+    if releases < 0:
+        raise InputError(f"-pfault_contact_chatter_releases: must be 0 or more (e.g. 2), got {releases}")
     srtol = reader.get("pfault_time_step_rtol")
     if not 0 <= srtol < 1:
         raise InputError(f"-pfault_time_step_rtol: must lie in [0, 1) (e.g. 1e-10; 0 switches it off), got {srtol}")
@@ -272,6 +275,7 @@ def read_contact_options(reader, materials, serial_extent):
             "slip_direction": reader.get("pfault_contact_slip_direction"),
             "slip_augmentation": aug,
             "chatter_tol": reader.get("pfault_contact_chatter_tol"),
+            "chatter_releases": releases,
             "slip_regularization": reader.get("pfault_contact_slip_regularization"),
             "reuse_factorization": reader.get("pfault_solver_reuse_factorization"),
             "predictor": reader.get("pfault_time_predictor"),

@@ -470,26 +470,41 @@ class FaultSystem:
         """Faces kept in a state by the anti-chatter rule that the contact conditions reject, and the largest
         such violation relative to the fault's median normal traction (tension on a closed face, or the shear
         excess over the Coulomb limit). Returns (count, relative violation), the same on all ranks."""
+        faces, excess, t_ref = self._frozen_violating(x_loc, traction_tol, opening_tol, slip_tol_ratio)
+        worst = float(np.max(excess)) / t_ref if len(excess) else 0.0
+        return int(self.mpi.allreduce(len(faces), op=MPI.SUM)), float(self.mpi.allreduce(worst, op=MPI.MAX))
+
+    def _frozen_violating(self, x_loc, traction_tol, opening_tol, slip_tol_ratio):
+        """(owned faces, their violation in Pa, the fault's median normal traction) of the frozen faces the
+        contact conditions reject (see frozen_violations)."""
         t = self.effective(self.tractions(x_loc))
         t_all = t[self.lagrange] if self.has_lagrange else np.zeros((0, 3))
         tn_all = np.concatenate(self.mpi.allgather(np.abs(t_all[:, 0])))
         t_ref = max(float(np.median(tn_all)) if len(tn_all) else 0.0, traction_tol)
         lag = np.nonzero(self.lagrange & self.frozen)[0] if hasattr(self, "banned") else np.zeros(0, np.int64)
-        bad, worst = 0, 0.0
-        if len(lag):
-            opening_tol = self._opening_tol(opening_tol)[lag]
-            _, gl = self.jumps(x_loc)
-            new = ct.update_states(self.state[lag], t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag],
-                                   traction_tol, opening_tol, slip_tol_ratio, **self._state_args(lag, gl))
-            kept_closed = self._kept_closed(lag, self.state[lag], new)
-            viol = ((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1)) | (kept_closed & (t[lag][:, 0] > traction_tol))
-            bad = int(np.count_nonzero(viol))
-            if bad:
-                tt = t[lag][viol]
-                tau = ct.coulomb_limit(tt[:, 0], self.cohesion[lag][viol], self.tan_phi[lag][viol])
-                excess = np.maximum(tt[:, 0], np.linalg.norm(tt[:, 1:], axis=1) - tau)
-                worst = float(np.max(excess)) / t_ref
-        return int(self.mpi.allreduce(bad, op=MPI.SUM)), float(self.mpi.allreduce(worst, op=MPI.MAX))
+        if not len(lag):
+            return lag, np.zeros(0), t_ref
+        opening_tol = self._opening_tol(opening_tol)[lag]
+        _, gl = self.jumps(x_loc)
+        new = ct.update_states(self.state[lag], t[lag], gl[lag], self.cohesion[lag], self.tan_phi[lag],
+                               traction_tol, opening_tol, slip_tol_ratio, **self._state_args(lag, gl))
+        kept_closed = self._kept_closed(lag, self.state[lag], new)
+        viol = (((new != self.state[lag]) & (((self.banned[lag] >> new) & 1) == 1))
+                | (kept_closed & (t[lag][:, 0] > traction_tol)))
+        tt = t[lag][viol]
+        tau = ct.coulomb_limit(tt[:, 0], self.cohesion[lag][viol], self.tan_phi[lag][viol])
+        excess = np.maximum(tt[:, 0], np.linalg.norm(tt[:, 1:], axis=1) - tau)
+        return lag[viol], excess, t_ref
+
+    def release_frozen(self, x_loc, traction_tol, opening_tol, slip_tol_ratio, chatter_tol):
+        """Lift the anti-chatter bans of the frozen faces that violate the contact conditions by more than
+        chatter_tol of the median normal traction: they may change state again, and their history in this
+        step restarts from their present state. Returns how many faces were released (all ranks)."""
+        faces, excess, t_ref = self._frozen_violating(x_loc, traction_tol, opening_tol, slip_tol_ratio)
+        faces = faces[excess > chatter_tol * t_ref]
+        self.banned[faces] = 0
+        self.visited[faces] = 1 << self.state[faces]
+        return int(self.mpi.allreduce(len(faces), op=MPI.SUM))
 
     def ban_last_change(self):
         """Forbid the changes of the last update (a single face whose change Newton could not solve even

@@ -580,7 +580,7 @@ class FaultProblem(ElasticProblem):
         if len(tried) > 1:
             rec = dict(rec)
             for key in ("newton_its", "ksp_its", "wall_s", "active_set_its", "factorizations", "reuse_failures",
-                        "newton_stalls"):
+                        "newton_stalls", "chatter_releases"):
                 rec[key] = sum(r.get(key, 0) for r in tried)
             rec["time_s"] = float(t)
             rec["substeps"] = 2 ** cuts
@@ -617,7 +617,11 @@ class FaultProblem(ElasticProblem):
         fraction = 1.0
         last_changes = 0
         nfact0, nfail0, nstall0 = self.n_factorizations, self.n_reuse_failures, self.n_stalls
-        for it in range(1, o["max_active_set_its"] + 1):
+        it = releases = 0
+        last_reason = 0
+        limit = o["max_active_set_its"]
+        while it < limit:
+            it += 1
             nstall_round = self.n_stalls
             reason, its, kits, hist = self._snes_solve(snes)
             newton += its
@@ -657,11 +661,34 @@ class FaultProblem(ElasticProblem):
                                 f"->open {tr[0, 2] + tr[1, 2]}  open->stick {tr[2, 0]}"
                                 + ("" if fraction == 1.0 else f"  (bounded update: {fraction:g})"))
             if reason > 0 and changed <= o["active_set_tol"] * total_area:
+                if releases < o["chatter_releases"]:
+                    # faces the anti-chatter rule holds in a state the contact conditions reject beyond
+                    # chatter_tol are released and the updates go on (a fresh budget of rounds)
+                    n = self.faults.release_frozen(x_loc, o["traction_tol"], o["opening_tol"], o["slip_tol"],
+                                                   o["chatter_tol"])
+                    if n:
+                        releases += 1
+                        limit = it + o["max_active_set_its"]
+                        self.faults.save_state()
+                        if o["monitor"]:
+                            PETSc.Sys.Print(f"  released {n} faces held by the anti-chatter rule in a state the "
+                                            f"contact conditions reject ({releases} of "
+                                            f"{o['chatter_releases']})")
+                        continue
                 settled = True
                 break
             if reason <= 0 and changed == 0.0:
-                converged = False
+                # back at the last solved configuration (if any), and every change its faces ask for is
+                # banned: it stands as the step's solution if the banned faces' violations are within
+                # chatter_tol
+                if last_reason > 0:
+                    reason = last_reason
+                    settled = True
+                else:
+                    converged = False
                 break
+            if reason > 0:
+                last_reason = reason
         x_conv.destroy()
         x_loc = self.local_array(self.u)
         counts = self.faults.counts_by_state(x_loc)
@@ -669,7 +696,7 @@ class FaultProblem(ElasticProblem):
                "wall_s": _time.perf_counter() - t0, "active_set_its": it, "active_set_settled": bool(settled),
                "factorizations": int(self.n_factorizations - nfact0),
                "reuse_failures": int(self.n_reuse_failures - nfail0),
-               "newton_stalls": int(self.n_stalls - nstall0),
+               "newton_stalls": int(self.n_stalls - nstall0), "chatter_releases": int(releases),
                "converged": bool(converged and settled), "reason": int(reason), "residual_history": history}
         rec.update(counts)
         rec["frozen_faces"] = self.faults.frozen_count()
