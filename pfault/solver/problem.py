@@ -21,6 +21,9 @@ REUSE_CONTRACTION = 0.1
 STALL_ITS = 5
 STALL_FACTOR = 0.5
 STALL_ACCEPT = 10.0
+# within STALL_ACCEPT times the absolute tolerance a single iteration that cuts |F| by less than FLAT_FACTOR
+# is already a stall: accepted at once instead of after STALL_ITS iterations (each may refactor)
+FLAT_FACTOR = 0.9
 
 
 class ElasticProblem:
@@ -376,7 +379,8 @@ class FaultProblem(ElasticProblem):
                 return R.CONVERGED_SNORM_RELATIVE
             if self._divtol > 0 and fnorm > self._divtol * f0:
                 return R.DIVERGED_DTOL
-            if its >= STALL_ITS and fnorm > STALL_FACTOR * self._fnorms[its - STALL_ITS]:
+            flat = fnorm <= STALL_ACCEPT * atol and fnorm > FLAT_FACTOR * self._fnorms[its - 1]
+            if flat or (its >= STALL_ITS and fnorm > STALL_FACTOR * self._fnorms[its - STALL_ITS]):
                 self.n_stalls += 1
                 return R.CONVERGED_ITS if fnorm <= STALL_ACCEPT * atol else R.DIVERGED_MAX_IT
         return R.CONVERGED_ITERATING
