@@ -357,7 +357,8 @@ class FaultProblem(ElasticProblem):
     def _converged(self, snes, its, norms):
         """PETSc's default convergence test (SNESConvergedDefault: atol, rtol, stol, divergence tolerance,
         function-count limit) plus a stall test: STALL_ITS iterations that cut |F| by less than STALL_FACTOR
-        end the solve, with CONVERGED_ITS within STALL_ACCEPT atol, else with DIVERGED_MAX_IT."""
+        end the solve, with CONVERGED_ITS within STALL_ACCEPT atol, else with DIVERGED_MAX_IT; within
+        STALL_ACCEPT atol one iteration that cuts |F| by less than FLAT_FACTOR already ends it (CONVERGED_ITS)."""
         xnorm, ynorm, fnorm = norms
         R = PETSc.SNES.ConvergedReason
         rtol, atol, stol, _ = snes.getTolerances()

@@ -526,6 +526,12 @@ def discussion(results):
             fb_step = next((k + 1 for k, st in enumerate(steps_n) if st.get("slip_direction_fallback")), "—")
             cut_text = ", ".join(f"step {k + 1} in {st['substeps']} sub-steps" for k, st in enumerate(steps_n)
                                  if st.get("substeps", 1) > 1)
+            released = [k + 1 for k, st in enumerate(steps_n) if st.get("chatter_releases", 0) > 0
+                        and not st.get("slip_direction_fallback")]
+            if released:
+                cut_text = ", ".join(filter(None, [cut_text, (
+                    f"step{'s' if len(released) > 1 else ''} {', '.join(map(str, released))} release faces "
+                    "held by the anti-chatter rule against their contact conditions")]))
             parts.append(
                 f"Without the geostatic stress (`{os.path.basename(qn['dir'])}`, `-pfault_geostatic false`{at}: the "
                 "stresses are the pumping's increments only, and the c = 0 fault starts with no strength, its "
@@ -620,10 +626,17 @@ def targets_text(results):
             f"({q['active_set_total']} rounds). Its head falls far below the aquifer's bottom, so the upper fault "
             "faces are dry (pore pressure clamped at zero) and open in the last steps, where single-face changes "
             "that Newton cannot solve cost bounded-update rounds (a stalled Newton solve is stopped after 5 "
-            f"iterations: {sum(st.get('newton_stalls', 0) for st in q['summary']['steps'])} stalls in this run). "
-            "What would bring it under the target: a configuration change of a few faces handled by GMRES on the "
-            "old factorisation (a low-rank change) instead of a refactorisation, or a cheaper factorisation (a "
-            "MUMPS with METIS ordering, or more cores).")
+            "iterations, or after one within 10 times the tolerance: "
+            f"{sum(st.get('newton_stalls', 0) for st in q['summary']['steps'])} stalls in this run). "
+            "At ~4 s a factorisation the 180 s target leaves room for about 35, fewer than the rounds. Tried and "
+            "not kept: GMRES on the old factorisation across a configuration change of up to 20 faces (a "
+            "low-rank change; size factor 2: 42 factorisations instead of 39, the slow contraction after the "
+            "change refactors anyway); active-set updates taken from Newton solves stopped at 0.1 of their "
+            "initial residual (size factor 2: half the Newton iterations, but updates decided on loose solutions "
+            "propose closing changes Newton cannot solve, 49 factorisations instead of 34); MUMPS's block "
+            "low-rank factorisation (BLR, 1e-8): 4 % less factorisation time at paper size. What would bring it "
+            "under the target: a cheaper factorisation (a MUMPS with METIS or parallel ordering, or more cores) "
+            "or fewer rounds per step.")
     return "\n".join(out)
 
 
