@@ -37,6 +37,7 @@ BAD = [
     (["-pfault_solver", "superfast"], "-pfault_solver superfast"),
     (["-pfault_contact_slip_augmentation", "-1"], "-pfault_contact_slip_augmentation: must be positive"),
     (["-pfault_time_step_rtol", "2"], "-pfault_time_step_rtol: must lie in [0, 1)"),
+    (["-pfault_contact_chatter_releases", "-1"], "-pfault_contact_chatter_releases: must be 0 or more"),
 ]
 
 
