@@ -499,11 +499,15 @@ class FaultSystem:
     def release_frozen(self, x_loc, traction_tol, opening_tol, slip_tol_ratio, chatter_tol):
         """Lift the anti-chatter bans of the frozen faces that violate the contact conditions by more than
         chatter_tol of the median normal traction: they may change state again, and their history in this
-        step restarts from their present state. Returns how many faces were released (all ranks)."""
+        step restarts from their present state (also in the saved state, as ban_last_change does for a ban).
+        Returns how many faces were released (all ranks)."""
         faces, excess, t_ref = self._frozen_violating(x_loc, traction_tol, opening_tol, slip_tol_ratio)
         faces = faces[excess > chatter_tol * t_ref]
         self.banned[faces] = 0
         self.visited[faces] = 1 << self.state[faces]
+        if hasattr(self, "_saved"):
+            self._saved[1][faces] = 1 << self._saved[0][faces]
+            self._saved[2][faces] = 0
         return int(self.mpi.allreduce(len(faces), op=MPI.SUM))
 
     def ban_last_change(self):

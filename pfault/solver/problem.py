@@ -674,7 +674,6 @@ class FaultProblem(ElasticProblem):
                     if n:
                         releases += 1
                         limit = it + o["max_active_set_its"]
-                        self.faults.save_state()
                         if o["monitor"]:
                             PETSc.Sys.Print(f"  released {n} faces held by the anti-chatter rule in a state the "
                                             f"contact conditions reject ({releases} of "

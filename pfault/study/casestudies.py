@@ -524,14 +524,14 @@ def discussion(results):
             at = "" if f_n == 1.0 else f" at size factor {f_n:g}"
             steps_n = [st for st in qn["summary"]["steps"] if st.get("time_s", 0) > 0]
             fb_step = next((k + 1 for k, st in enumerate(steps_n) if st.get("slip_direction_fallback")), "—")
-            cut_text = ", ".join(f"step {k + 1} in {st['substeps']} sub-steps" for k, st in enumerate(steps_n)
-                                 if st.get("substeps", 1) > 1)
+            notes = [f"step {k + 1} in {st['substeps']} sub-steps" for k, st in enumerate(steps_n)
+                     if st.get("substeps", 1) > 1]
             released = [k + 1 for k, st in enumerate(steps_n) if st.get("chatter_releases", 0) > 0
                         and not st.get("slip_direction_fallback")]
             if released:
-                cut_text = ", ".join(filter(None, [cut_text, (
-                    f"step{'s' if len(released) > 1 else ''} {', '.join(map(str, released))} release faces "
-                    "held by the anti-chatter rule against their contact conditions")]))
+                notes.append(f"step{'s' if len(released) > 1 else ''} {', '.join(map(str, released))} release "
+                             "faces held by the anti-chatter rule against their contact conditions")
+            cut_text = ", ".join(notes)
             parts.append(
                 f"Without the geostatic stress (`{os.path.basename(qn['dir'])}`, `-pfault_geostatic false`{at}: the "
                 "stresses are the pumping's increments only, and the c = 0 fault starts with no strength, its "
