@@ -338,7 +338,8 @@ def steps_table(r):
     head = ("| step | t (yr) | Newton | KSP | LU | active-set | stick/slip/open | wall s | subsidence m | opening cm | "
             "slip cm |" + (" drawdown m |" if flow else ""))
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
-    for i, s in enumerate(steps):
+    first = 0 if steps and steps[0]["time_s"] == 0 else 1     # step 0 is the initial (geostatic) state
+    for i, s in enumerate(steps, start=first):
         row = (f"| {i} | {s['time_s'] / fg.YEAR:.3g} | {s.get('newton_its', 0)} | {s.get('ksp_its', 0)} | "
                f"{s.get('factorizations', '—')} | {s.get('active_set_its', '—')} | {s.get('stick', '—')}/{s.get('slip', '—')}/{s.get('open', '—')} | "
                f"{s.get('wall_s', 0.0):.1f} | {s.get('max_subsidence_m', 0.0):.3g} | "
@@ -548,6 +549,17 @@ def discussion(results):
                 "the solver: the augmented slip direction chatters on faces of zero strength, and step "
                 f"{fb_step} is redone with the increment direction, which settles the rest of the run"
                 + (f" ({cut_text})." if cut_text else "."))
+        qwn = _variant(results, "queretaro_calibrated", "wells500-nogeostatic")
+        if qwn is not None:
+            parts.append(
+                f"Both together (`{os.path.basename(qwn['dir'])}`: wells 500 m from the fault at 32.6 L/s and no "
+                f"geostatic stress; drawdown {qwn['max_drawdown_m']:.3g} m) come closest to the paper's figures: "
+                f"slip {_face_and_surface(qwn, 'slip', 'cm')}, "
+                f"{100.0 * qwn['max_fault_slip_m'] / qwn['max_subsidence_m']:.0f} % of the subsidence "
+                f"({_m(qwn['max_subsidence_m'])}), opening {_face_and_surface(qwn, 'opening', 'cm')}"
+                + next((f"; step {k + 1} is again redone with the increment slip direction."
+                        for k, st in enumerate(st for st in qwn["summary"]["steps"] if st.get("time_s", 0) > 0)
+                        if st.get("slip_direction_fallback")), "."))
         parts.append(
             "Other likely differences: the geometry is ours (vertical fault through the whole 50 m, wells 2 km from "
             "it, clay 20 m over a 30 m aquifer, fixed-head far boundaries), and the maximum drawdown sits at the "
@@ -595,8 +607,11 @@ def targets_text(results):
     out.append(
         "How the Querétaro run gets there (paper size, 2 ranks, measured on this machine). A factorisation of the "
         "212,634-dof saddle-point Jacobian costs 3.6 s with PORD (1.9e11 flops, ~50 Gflop/s over the two cores; "
-        "the best of PORD, AMF 5.1 s, AMD 7.4 s and QAMD 6.6 s; BLR gives no gain and Debian's MUMPS has no METIS "
-        "or parallel ordering; SuperLU_dist with METIS refactors in 7.4 s), a GMRES iteration on it 0.12 s. So the "
+        "the best of PORD, AMF 5.1 s, AMD 7.4 s and QAMD 6.6 s; BLR gives no gain; the MUMPS PETSc links has no "
+        "METIS or Scotch ordering, but Debian's PT-Scotch build of the same MUMPS (libmumps-ptscotch-5.5, loaded in "
+        "its place with LD_PRELOAD) does: Scotch 4.2 s (2.2e11 flops) and parallel PT-Scotch 3.9 s (2.3e11) against "
+        "PORD's 3.6 s on the same step; SuperLU_dist with METIS refactors in 7.4 s), a GMRES iteration on it "
+        "0.12 s. So the "
         "run time is the number of factorisations. Refactoring at every Newton iteration with the increment slip "
         "direction: 102 factorisations, 409 s. Reusing the factorisation as the GMRES preconditioner of the exact "
         "Jacobian while the stick/slip/open configuration is unchanged and Newton contracts tenfold per step "
@@ -635,8 +650,8 @@ def targets_text(results):
             "initial residual (size factor 2: half the Newton iterations, but updates decided on loose solutions "
             "propose closing changes Newton cannot solve, 49 factorisations instead of 34); MUMPS's block "
             "low-rank factorisation (BLR, 1e-8): 4 % less factorisation time at paper size. What would bring it "
-            "under the target: a cheaper factorisation (a MUMPS with METIS or parallel ordering, or more cores) "
-            "or fewer rounds per step.")
+            "under the target: a cheaper factorisation (an ordering better than PORD's, which METIS might give "
+            "where Scotch and PT-Scotch did not; more cores) or fewer rounds per step.")
     return "\n".join(out)
 
 
@@ -692,11 +707,19 @@ def write_readme(results, path, regenerate_cmd):
     results = sorted(results, key=lambda r: (list(CASES).index(_case_of(r)), os.path.basename(r["dir"])))
     d0 = next((r["driver"] for r in results if r["driver"]), {})
     ver = {}
-    if results:
-        vpath = os.path.join(results[0]["dir"], "versions.json")
+    revs = {}                   # pfault git revision -> runs made with it
+    for r in results:
+        vpath = os.path.join(r["dir"], "versions.json")
         if os.path.exists(vpath):
             with open(vpath) as fh:
-                ver = json.load(fh)
+                v = json.load(fh)
+            ver = ver or v
+            revs.setdefault(v.get("git", "?"), []).append(os.path.basename(r["dir"]))
+    if len(revs) > 1:
+        main_rev = max(revs, key=lambda k: len(revs[k]))
+        others = "; ".join(f"{', '.join(f'`{n}`' for n in names)} at {rev[:7]}{rev[40:]}"
+                           for rev, names in revs.items() if rev != main_rev)
+        ver["git"] = f"{main_rev} ({others})"
     text = [
         "# runs",
         "",
