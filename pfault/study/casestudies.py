@@ -607,7 +607,7 @@ def targets_text(results):
     out.append(
         "How the Querétaro run gets there (paper size, 2 ranks, measured on this machine). A factorisation of the "
         "212,634-dof saddle-point Jacobian costs 3.6 s with PORD (1.9e11 flops, ~50 Gflop/s over the two cores; "
-        "the best of PORD, AMF 5.1 s, AMD 7.4 s and QAMD 6.6 s; BLR gives no gain; the MUMPS PETSc links has no "
+        "the best of PORD, AMF 5.1 s, AMD 7.4 s and QAMD 6.6 s; BLR gives no gain; the MUMPS that PETSc links has no "
         "METIS or Scotch ordering, but Debian's PT-Scotch build of the same MUMPS (libmumps-ptscotch-5.5, loaded in "
         "its place with LD_PRELOAD) does: Scotch 4.2 s (2.2e11 flops) and parallel PT-Scotch 3.9 s (2.3e11) against "
         "PORD's 3.6 s on the same step; SuperLU_dist with METIS refactors in 7.4 s), a GMRES iteration on it "
