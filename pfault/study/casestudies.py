@@ -412,6 +412,17 @@ def _variant(results, case, tag, any_size=False):
     return None
 
 
+def _loading_steps(r):
+    """(step number, record) of a run's loading steps, numbered from 1 (the initial state, when a run has one,
+    is step 0)."""
+    return [(n, st) for n, st in enumerate((st for st in r["summary"]["steps"] if st.get("time_s", 0) > 0), 1)]
+
+
+def _fallback_step(r):
+    """The step a run redid with the increment slip direction, or None."""
+    return next((n for n, st in _loading_steps(r) if st.get("slip_direction_fallback")), None)
+
+
 def _finest(results, case, tag=""):
     """The converged run of a case variant (``tag``; no extra options when untagged) on the finest mesh finer
     than the paper's (size factor < 1), or None."""
@@ -523,11 +534,10 @@ def discussion(results):
             base_name = run_name("queretaro_calibrated", size_factor=f_n)
             same = [r for r in results if os.path.basename(r["dir"]) == base_name and r["converged"]]
             at = "" if f_n == 1.0 else f" at size factor {f_n:g}"
-            steps_n = [st for st in qn["summary"]["steps"] if st.get("time_s", 0) > 0]
-            fb_step = next((k + 1 for k, st in enumerate(steps_n) if st.get("slip_direction_fallback")), "—")
-            notes = [f"step {k + 1} in {st['substeps']} sub-steps" for k, st in enumerate(steps_n)
+            fb_step = _fallback_step(qn) or "—"
+            notes = [f"step {n} in {st['substeps']} sub-steps" for n, st in _loading_steps(qn)
                      if st.get("substeps", 1) > 1]
-            released = [k + 1 for k, st in enumerate(steps_n) if st.get("chatter_releases", 0) > 0
+            released = [n for n, st in _loading_steps(qn) if st.get("chatter_releases", 0) > 0
                         and not st.get("slip_direction_fallback")]
             if released:
                 notes.append(f"step{'s' if len(released) > 1 else ''} {', '.join(map(str, released))} release "
@@ -551,15 +561,14 @@ def discussion(results):
                 + (f" ({cut_text})." if cut_text else "."))
         qwn = _variant(results, "queretaro_calibrated", "wells500-nogeostatic")
         if qwn is not None:
+            fb_both = _fallback_step(qwn)
             parts.append(
                 f"Both together (`{os.path.basename(qwn['dir'])}`: wells 500 m from the fault at 32.6 L/s and no "
                 f"geostatic stress; drawdown {qwn['max_drawdown_m']:.3g} m) come closest to the paper's figures: "
                 f"slip {_face_and_surface(qwn, 'slip', 'cm')}, "
                 f"{100.0 * qwn['max_fault_slip_m'] / qwn['max_subsidence_m']:.0f} % of the subsidence "
                 f"({_m(qwn['max_subsidence_m'])}), opening {_face_and_surface(qwn, 'opening', 'cm')}"
-                + next((f"; step {k + 1} is again redone with the increment slip direction."
-                        for k, st in enumerate(st for st in qwn["summary"]["steps"] if st.get("time_s", 0) > 0)
-                        if st.get("slip_direction_fallback")), "."))
+                + (f"; step {fb_both} is again redone with the increment slip direction." if fb_both else "."))
         parts.append(
             "Other likely differences: the geometry is ours (vertical fault through the whole 50 m, wells 2 km from "
             "it, clay 20 m over a 30 m aquifer, fixed-head far boundaries), and the maximum drawdown sits at the "
