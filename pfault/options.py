@@ -107,33 +107,6 @@ SPECS = [
        "the adjacent cell)"),
     _s("pfault_fault_<fault>_penalty_tangential", "quantity", 0.0, "Pa/m", "tangential penalty stiffness "
        "(0: E/h of the adjacent cell)"),
-    _s("pfault_contact_max_active_set_its", "int", 30, "", "active-set (stick/slip/open) updates per step "
-       "before the step is reported as not settled"),
-    _s("pfault_contact_traction_tol", "quantity", -1.0, "Pa", "tensile normal traction that opens a closed "
-       "face (default 1e-8 of the largest Young's modulus)"),
-    _s("pfault_contact_opening_tol", "quantity", -1.0, "m", "interpenetration that closes an open face "
-       "(default 1e-6 of each face's size)"),
-    _s("pfault_contact_slip_tol", "quantity", 1e-3, "", "relative hysteresis of the stick/slip switch"),
-    _s("pfault_contact_slip_regularization", "quantity", 0.0, "", "slip-direction regularisation eps as a "
-       "fraction of the face size: s = dg/sqrt(|dg|^2 + eps^2) (0: exact Coulomb; small values help faces "
-       "whose slip is kinematically blocked)"),
-    _s("pfault_contact_chatter_tol", "quantity", 0.02, "", "faces caught oscillating between two states are "
-       "kept in one; the step fails if that leaves a violation (tension on a closed face, or shear above the "
-       "Coulomb limit) larger than this fraction of the fault's median normal traction; counts and the largest "
-       "violation are in summary.json (frozen_violating, frozen_max_violation)"),
-    _s("pfault_contact_chatter_releases", "int", 2, "", "a step that settles with faces held by the "
-       "anti-chatter rule in a state violating the contact conditions by more than -pfault_contact_chatter_tol "
-       "releases those faces (they may change state again) and goes on with its active-set updates, up to this "
-       "many times; then the step fails and is retried (0: fail at once)"),
-    _s("pfault_contact_slip_direction", "choice", "increment", "", "slip direction of slipping faces: "
-       "augmented, s = q/|q| with q = t_T + c dg_T (-pfault_contact_slip_augmentation; smooth while a face starts to slip; "
-       "a step it cannot solve is redone with increment, kept for the rest of the run); increment, "
-       "s = dg_T/|dg_T| (needs -pfault_contact_slip_regularization where slip is kinematically blocked)",
-       choices=("augmented", "increment")),
-    _s("pfault_contact_slip_augmentation", "quantity", 0.01, "", "augmented slip direction: c in q = t_T + c dg_T "
-       "as a fraction of E/h of the face's cell (the converged solution does not depend on it; smaller values "
-       "let the traction steer Newton while a face starts to slip: on Queretaro 0.01 needs 2.5x fewer "
-       "factorisations than 1)"),
     _s("pfault_contact_effective_stress", "bool", True, "", "friction and opening act on the effective normal "
        "traction t_N + alpha p (Terzaghi; p the pore pressure at the face: hydrostatic below the water table "
        "in a geostatic scene, plus the change); an open face carries the water pressure. false: on the total "
@@ -142,23 +115,11 @@ SPECS = [
        "clamps the fault's pore pressure at zero, so a face above the lowered water table is dry (neither water "
        "pressure nor suction acts on it); true keeps the negative pressure, whose suction then presses the "
        "faces together"),
-    _s("pfault_contact_monitor", "bool", False, "", "print one line per active-set update (Newton its, "
-       "residual, state transitions)"),
-    _s("pfault_contact_bounded_growth", "quantity", 2.0, "", "after a Newton failure an active-set update "
-       "changes only a share of the faces asking for a change, those asking most (0.25, then 0.0625, ...); "
-       "each solved update multiplies that share by this factor, up to all faces (0: all at once right after "
-       "a success; 2 saves a third of the factorisations on a 43-degree Wuxi ridge)"),
-    _s("pfault_contact_active_set_tol", "quantity", 0.0, "", "fraction of the fault area allowed to change "
-       "state in the last active-set update of a settled step"),
+    _s("pfault_contact_monitor", "bool", False, "", "print one line per Newton iteration of fault scenes: "
+       "residual norm, stick/slip/open counts and how many faces changed state"),
     # solver
     _s("pfault_solver", "string", "", "", "solver options file: a name in config/solver (mumps, gamg, "
        "fieldsplit) or a path; its options apply where not set by the scene or the command line"),
-    _s("pfault_solver_reuse_factorization", "bool", True, "", "fault scenes with a direct factorisation "
-       "(-pc_type lu): a Newton iteration on an unchanged stick/slip/open configuration, after a Newton step "
-       "that cut the residual at least tenfold, keeps the last factorisation as the preconditioner of GMRES "
-       "on the exact Jacobian instead of refactoring (a new configuration, a slower contraction or a GMRES "
-       "solve that fails within -ksp_max_it refactor); false: refactor at every Newton iteration whose "
-       "Jacobian changed"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
     _s("pfault_geostatic_k0", "quantity", -1.0, "", "ratio of horizontal to vertical effective stress "
@@ -181,19 +142,9 @@ SPECS = [
     # time
     _s("pfault_time_end", "quantity", 1.0, "s", "end time (units allowed, e.g. 10*year)"),
     _s("pfault_time_steps", "int", 1, "", "number of equal time steps"),
-    _s("pfault_time_predictor", "bool", True, "", "fault scenes with the augmented slip direction: a step "
-       "starts from the last two converged states extrapolated linearly in time (displacements and "
-       "multipliers), and faces that slid by more than the slip regularisation in the last step start it "
-       "slipping; false (and always with the increment slip direction, singular at the zero increment an "
-       "overshooting prediction must return to when the loading stops): from the last state, slipping faces "
-       "stuck"),
-    _s("pfault_time_step_rtol", "quantity", 1e-10, "", "fault scenes: the Newton solves of a step stop once the "
-       "residual norm is below this fraction of its value at the start of the step (before that, at "
-       "-snes_rtol of each solve's initial residual or -snes_atol); 0: only -snes_rtol/-snes_atol"),
-    _s("pfault_time_max_cuts", "int", 3, "", "a fault step that does not converge is retried as 2, 4, ... equal "
-       "sub-steps, halving up to this many times (0: no retry); the pore pressure of a flow model is "
-       "interpolated linearly in time between its steps (with the augmented slip direction the step is first "
-       "redone with the increment direction, which then stays)"),
+    _s("pfault_time_max_cuts", "int", 3, "", "a fault step whose Newton solve does not converge is retried as "
+       "2, 4, ... equal sub-steps, halving up to this many times (0: no retry); the pore pressure of a flow "
+       "model is interpolated linearly in time between its steps"),
 ]
 
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")

@@ -223,7 +223,7 @@ def boundary_arrays(serial, bcs, ground_surface):
 
 
 def read_faults(reader, surface_names):
-    from .solver.fault import FaultSettings
+    from .faults.settings import FaultSettings
     names = reader.get("pfault_faults")
     faults = []
     for name in names:
@@ -246,37 +246,8 @@ def read_faults(reader, surface_names):
     return faults
 
 
-def read_contact_options(reader, materials, serial_extent):
-    emax = max(m.young_modulus for m in materials)
-    ttol = reader.get("pfault_contact_traction_tol")
-    otol = reader.get("pfault_contact_opening_tol")
-    aug = reader.get("pfault_contact_slip_augmentation")
-    if not aug > 0:
-        raise InputError(f"-pfault_contact_slip_augmentation: must be positive (a fraction of E/h, e.g. 0.01), got {aug}")
-    growth = reader.get("pfault_contact_bounded_growth")
-    if not (growth == 0 or growth >= 1):
-        raise InputError(f"-pfault_contact_bounded_growth: must be 0 (all faces after a success) or at least 1 "
-                         f"(e.g. 2), got {growth}")
-    releases = reader.get("pfault_contact_chatter_releases")
-    if releases < 0:
-        raise InputError(f"-pfault_contact_chatter_releases: must be 0 or more (e.g. 2), got {releases}")
-    srtol = reader.get("pfault_time_step_rtol")
-    if not 0 <= srtol < 1:
-        raise InputError(f"-pfault_time_step_rtol: must lie in [0, 1) (e.g. 1e-10; 0 switches it off), got {srtol}")
-    return {"max_active_set_its": reader.get("pfault_contact_max_active_set_its"),
-            "traction_tol": ttol if ttol >= 0 else 1e-8 * emax,
-            "opening_tol": otol,
-            "slip_tol": reader.get("pfault_contact_slip_tol"),
-            "active_set_tol": reader.get("pfault_contact_active_set_tol"),
-            "bounded_growth": growth,
-            "monitor": reader.get("pfault_contact_monitor"),
-            "effective_stress": reader.get("pfault_contact_effective_stress"),
-            "suction": reader.get("pfault_contact_suction"),
-            "slip_direction": reader.get("pfault_contact_slip_direction"),
-            "slip_augmentation": aug,
-            "chatter_tol": reader.get("pfault_contact_chatter_tol"),
-            "chatter_releases": releases,
-            "slip_regularization": reader.get("pfault_contact_slip_regularization"),
-            "reuse_factorization": reader.get("pfault_solver_reuse_factorization"),
-            "predictor": reader.get("pfault_time_predictor"),
-            "step_rtol": reader.get("pfault_time_step_rtol")}
+def read_contact_options(reader):
+    from .faults.settings import ContactSettings
+    return ContactSettings(effective_stress=reader.get("pfault_contact_effective_stress"),
+                           suction=reader.get("pfault_contact_suction"),
+                           monitor=reader.get("pfault_contact_monitor"))

@@ -13,7 +13,7 @@ from .assembly.elastic import ElasticAssembler
 from .errors import InputError, run_on_root
 from .mesh import distributed
 from .options import OptionReader, check_unused_petsc_options
-from .solver.problem import ElasticProblem
+from .solver.problem import Problem, constrained_local
 
 
 class NotConverged(Exception):
@@ -68,8 +68,7 @@ class Simulation:
         self.fault_settings = scn.read_faults(reader, self.surface_names)
         fault_names = [f.name for f in self.fault_settings]
         self.boundaries = scn.read_boundaries(reader, self.surface_names, exclude=fault_names)
-        extent = comm.tompi4py().bcast(float(np.ptp(serial.points, axis=0).max()) if comm.rank == 0 else None)
-        self.contact_opts = scn.read_contact_options(reader, self.materials, extent)
+        self.contact = scn.read_contact_options(reader) if fault_names else None
         reader.check_pfault_options()
 
         def arrays():
@@ -77,23 +76,23 @@ class Simulation:
             if self.flow_settings is not None:
                 from .solver.flow import FIXED_HEAD_BIT, fixed_head_vertices
                 out[0][:] |= FIXED_HEAD_BIT * fixed_head_vertices(serial, self.flow_settings.fixed_head_surfaces)
-            split = pairs = None
+            split = topology = None
             if fault_names:
+                from .faults.interface import fault_topology
                 from .mesh.fault import split_faults
-                from .solver.fault import stabilization_pairs
                 split = split_faults(serial, fault_names)
-                pairs = stabilization_pairs(serial, split, self.materials)
-            return out, split, pairs
+                topology = fault_topology(serial, split, self.materials)
+            return out, split, topology
         arr = run_on_root(comm, arrays)
-        (mask, face_tag, ground), split, pairs = arr if arr is not None else ((None, None, None), None, None)
+        (mask, face_tag, ground), split, topology = arr if arr is not None else ((None, None, None), None, None)
         self.serial = serial
         self.split = split
         self.mesh = distributed.build(comm, serial, cell_face_tag=face_tag, vert_constraint=mask, vert_ground=ground,
                                       split=split)
         if fault_names:
             mpi = comm.tompi4py()
-            self.fault_id = mpi.bcast(split.fault_id if comm.rank == 0 else None)
-            self.pairs, self.pair_S = mpi.bcast(pairs if comm.rank == 0 else None)
+            self.fault_topology = mpi.bcast(topology if comm.rank == 0 else None)
+            self.fault_id = self.fault_topology.fault_id
         stage.pop()
         self.wall["mesh"] = time.perf_counter() - t0
 
@@ -120,23 +119,20 @@ class Simulation:
                                         fixed_head=(self.mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0,
                                         substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity)
             self.drawdown = self.flow
+        faults = None
         if self.fault_settings:
-            from .solver.problem import FaultProblem
-            self.problem = FaultProblem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s,
-                                        self.fault_settings, self.fault_id, self.pairs, self.pair_S, self.materials,
-                                        self.contact_opts)
-        else:
-            self.problem = ElasticProblem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s)
+            from .faults.interface import FaultInterface
+            faults = FaultInterface(self.mesh, self.dofmap, self.fault_settings, self.fault_topology, self.materials, constrained_local(self.mesh, self.dofmap),
+                                    self.mesh.dm.getLGMap(), self.contact)
+        self.problem = Problem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s, faults,
+                               self.contact)
         self.snes = self.problem.create_snes()
         stage.pop()
         self.wall["setup"] = time.perf_counter() - t0
 
     # ------------------------------------------------------------------------------------------
     def _solve(self, t, t_prev=0.0):
-        if self.fault_settings:
-            rec = self.problem.solve_interval(self.snes, t_prev, t, self.settings.max_cuts)
-        else:
-            rec = self.problem.solve_step(self.snes, t)
+        rec = self.problem.solve_interval(self.snes, t_prev, t, self.settings.max_cuts)
         if self.flow is not None and self.flow.history:
             rec["flow_ksp_its"] = int(self.flow.history[-1].get("ksp_its", 0))
             from mpi4py import MPI
@@ -302,8 +298,6 @@ class Simulation:
             extra += f"  opening {rec['max_fault_opening_m']:.3g} m  slip {rec['max_fault_slip_m']:.3g} m"
         if rec.get("substeps", 1) > 1:
             extra += f"  ({rec['substeps']} sub-steps)"
-        if rec.get("slip_direction_fallback"):
-            extra += "  (augmented slip direction failed: increment direction from here on)"
         _print(f"step {step:4d} t = {_fmt_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
                f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
                + f"  wall {rec['wall_s']:7.2f} s{extra}"
@@ -326,9 +320,6 @@ class Simulation:
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
             "converged": bool(converged),
         }
-        if getattr(self.problem, "slip_direction", None):
-            # the slip direction law in use at the end (an augmented one that failed is replaced for good)
-            self.summary["slip_direction"] = self.problem.slip_direction
         return self.summary
 
     def write_summary(self, total):

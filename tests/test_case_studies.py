@@ -185,4 +185,9 @@ def test_one_vs_two_ranks(scene, request):
         for key in ("max_subsidence_m", "max_fault_opening_m", "max_fault_slip_m", "max_drawdown_m"):
             if key in a:
                 assert b[key] == pytest.approx(a[key], rel=RANK_RTOL, abs=1e-14), (key, a["time_s"])
-        assert (a.get("stick"), a.get("slip"), a.get("open")) == (b.get("stick"), b.get("slip"), b.get("open"))
+        # a face at a switch (zero effective traction, no jump: open, slipping and stuck at once) lands on either
+        # side within the Newton tolerance, which the partition moves: the counts agree to a few faces
+        nf = s1["mesh"]["fault_faces"]
+        for key in ("stick", "slip", "open"):
+            if key in a:
+                assert abs(a[key] - b[key]) <= max(2, 0.005 * nf), (key, a["time_s"], a[key], b[key])

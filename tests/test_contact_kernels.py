@@ -1,11 +1,14 @@
-"""Contact/friction kernels: derivatives against finite differences in every state; active-set rules."""
+"""Contact/friction kernels (pfault.faults.contact): the semismooth residual's generalised derivative against
+finite differences in every state away from the kinks, its zeros (the contact conditions), its continuity
+across the stick/slip and closed/open switches, and its independence of the augmentation; the penalty law."""
 
 import numpy as np
 import pytest
 
-from pfault.physics import contact as ct
+from pfault.faults import contact as ct
 
 RNG = np.random.default_rng(7)
+TAN30 = np.tan(np.radians(30))
 
 
 def fd_check(fun, x, analytic, h=1e-7):
@@ -19,68 +22,115 @@ def fd_check(fun, x, analytic, h=1e-7):
     return np.abs(num - analytic).max() / scale
 
 
-def sample(n=40):
-    area = RNG.uniform(0.5, 2.0, n)
-    g = RNG.normal(size=(n, 3)) * 1e-2
+def law(n, cohesion=True, c=1e7):
+    coh = RNG.uniform(0, 1e4, n) if cohesion else np.zeros(n)
+    return ct.FaceLaw(RNG.uniform(0.5, 2.0, n), coh, np.full(n, TAN30), np.full(n, c), np.full(n, 0.7 * c))
+
+
+def sample(state, n=60):
+    """Iterates (g, g_prev, t) whose faces all lie in ``state``, at least 5 % away from every kink."""
+    lw = law(4 * n)
+    g = RNG.normal(size=(4 * n, 3)) * 1e-2
+    gp = RNG.normal(size=(4 * n, 3)) * 1e-2
+    t = RNG.normal(size=(4 * n, 3)) * 1e5
+    if state != ct.OPEN:
+        g[:, 0] = RNG.normal(size=4 * n) * 1e-4
+        t[:, 0] = -np.abs(t[:, 0]) - 5e4
+    lam = t[:, 0] + lw.c_n * g[:, 0]
+    tau = ct.coulomb_limit(np.minimum(lam, 0.0), lw.cohesion, lw.tan_phi)
+    q = np.linalg.norm(t[:, 1:] + lw.c_t[:, None] * (g[:, 1:] - gp[:, 1:]), axis=1)
+    away = (np.abs(lam) > 0.05 * np.abs(t[:, 0]) + 1.0) & (np.abs(q - tau) > 0.05 * tau + 1.0)
+    keep = np.nonzero((ct.states(lw, g, gp, t) == state) & away)[0][:n]
+    assert len(keep) >= 10, "sampler found too few faces in the state"
+    return lw[keep], g[keep], gp[keep], t[keep]
+
+
+@pytest.mark.parametrize("state", [ct.STICK, ct.SLIP, ct.OPEN])
+def test_semismooth_derivatives_in_each_state(state):
+    lw, g, gp, t = sample(state)
+    st, r, dg, dt = ct.lagrange_rows(lw, g, gp, t)
+    assert np.all(st == state)
+    assert fd_check(lambda x: ct.lagrange_rows(lw, x, gp, t)[1], g, dg, h=1e-9) < 1e-6
+    assert fd_check(lambda x: ct.lagrange_rows(lw, g, gp, x)[1], t, dt, h=1e-2) < 1e-6
+
+
+def test_zeros_are_the_contact_conditions():
+    """r = 0 exactly on: a closed stuck face (no normal jump, no slip increment, |t_T| <= tau); a slipping face
+    whose traction is on the Coulomb limit along its slip increment; an open face with zero traction."""
+    n = 12
+    lw = law(n, c=5e6)
     gp = RNG.normal(size=(n, 3)) * 1e-2
-    t = RNG.normal(size=(n, 3)) * 1e5
-    t[:, 0] = -np.abs(t[:, 0]) - 1e4
-    coh = RNG.uniform(0, 1e4, n)
-    tanphi = np.full(n, np.tan(np.radians(30)))
-    return area, g, gp, t, coh, tanphi
-
-
-@pytest.mark.parametrize("state", [ct.STICK, ct.SLIP, ct.OPEN])
-@pytest.mark.parametrize("moving", [True, False])
-def test_lagrange_rows_derivatives(state, moving):
-    area, g, gp, t, coh, tanphi = sample()
-    st = np.full(len(area), state)
-    tol = np.full(len(area), 1e-12 if moving else 1.0)  # 'not moving': the slip increment is below tolerance
-    r, dg, dt = ct.lagrange_rows(st, area, g, gp, t, coh, tanphi, tol)
-    assert fd_check(lambda x: ct.lagrange_rows(st, area, x, gp, t, coh, tanphi, tol)[0], g, dg) < 1e-6
-    assert fd_check(lambda x: ct.lagrange_rows(st, area, g, gp, x, coh, tanphi, tol)[0], t, dt, h=1e-2) < 1e-6
-
-
-@pytest.mark.parametrize("state", [ct.STICK, ct.SLIP, ct.OPEN])
-@pytest.mark.parametrize("reg", [0.0, 1e-3])
-def test_augmented_slip_rows_derivatives(state, reg):
-    area, g, gp, t, coh, tanphi = sample()
-    st = np.full(len(area), state)
-    c = np.full(len(area), 1e7)                      # E/h-like stiffness: c dg ~ t
-    tol = np.full(len(area), 1e-12)
-    eps = np.full(len(area), reg)
-    r, dg, dt = ct.lagrange_rows(st, area, g, gp, t, coh, tanphi, tol, eps, c)
-    assert fd_check(lambda x: ct.lagrange_rows(st, area, x, gp, t, coh, tanphi, tol, eps, c)[0], g, dg) < 1e-6
-    assert fd_check(lambda x: ct.lagrange_rows(st, area, g, gp, x, coh, tanphi, tol, eps, c)[0], t, dt,
-                    h=1e-2) < 1e-6
-
-
-def test_augmented_slip_row_vanishes_on_the_cone_and_sticks_when_slip_reverses():
-    """On the cone with the increment along the traction the augmented row is zero (maximum dissipation);
-    an increment against the traction sends the face back to stick."""
-    area, g, gp, t, coh, tanphi = sample(10)
-    tau = ct.coulomb_limit(t[:, 0], coh, tanphi)
-    d = g[:, 1:] - gp[:, 1:]
-    t[:, 1:] = tau[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
+    t = np.zeros((n, 3))
+    g = gp.copy()
+    t[:, 0] = -RNG.uniform(1e5, 1e6, n)
+    tau = ct.coulomb_limit(t[:, 0], lw.cohesion, lw.tan_phi)
+    stick, slip, opn = np.arange(n) % 3 == 0, np.arange(n) % 3 == 1, np.arange(n) % 3 == 2
+    # stick: any traction inside the cone
+    d = RNG.normal(size=(n, 2))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    t[stick, 1:] = 0.6 * tau[stick, None] * d[stick]
+    # slip: increment along the traction, traction on the cone
+    g[slip, 1:] = gp[slip, 1:] + 1e-3 * d[slip]
+    t[slip, 1:] = tau[slip, None] * d[slip]
     g[:, 0] = 0.0
-    c = np.full(10, 1e7)
-    st = np.full(10, ct.SLIP)
-    r, _, _ = ct.lagrange_rows(st, area, g, gp, t, coh, tanphi, np.full(10, 1e-12), None, c)
+    # open: opening, no traction
+    g[opn, 0] = 1e-3
+    t[opn] = 0.0
+    st, r, _, _ = ct.lagrange_rows(lw, g, gp, t)
+    assert list(st) == [ct.STICK, ct.SLIP, ct.OPEN] * (n // 3)
     assert np.abs(r).max() < 1e-9 * np.abs(t).max()
-    new = ct.update_states(st, t, g, coh, tanphi, 1.0, 1e-9, 1e-3, dg_t=d, c_aug=c)
-    assert np.all(new == ct.SLIP)
-    new = ct.update_states(st, t, g, coh, tanphi, 1.0, 1e-9, 1e-3, dg_t=-d, c_aug=c)
-    assert np.all(new == ct.STICK)
+    # and not a zero when the conditions are violated: shear above the cone on a face that does not slip
+    t2 = t.copy()
+    t2[stick, 1:] = 1.5 * tau[stick, None] * d[stick]
+    _, r2, _, _ = ct.lagrange_rows(lw, g, gp, t2)
+    assert np.all(np.linalg.norm(r2[stick], axis=1) > 0.1 * tau[stick] * lw.area[stick])
 
 
-def test_slip_row_vanishes_on_the_coulomb_cone():
-    area, g, gp, t, coh, tanphi = sample(10)
-    tau = ct.coulomb_limit(t[:, 0], coh, tanphi)
-    d = g[:, 1:] - gp[:, 1:]
-    t[:, 1:] = tau[:, None] * d / np.linalg.norm(d, axis=1)[:, None]
-    g[:, 0] = 0.0
-    r, _, _ = ct.lagrange_rows(np.full(10, ct.SLIP), area, g, gp, t, coh, tanphi, np.full(10, 1e-12))
-    assert np.abs(r).max() < 1e-9 * np.abs(t).max()
+def test_the_solution_does_not_depend_on_the_augmentation():
+    """Where r = 0 for one c it is zero for any c > 0 (the same contact conditions), and the state is the same."""
+    n = 9
+    lw = law(n, c=1e6)
+    gp = np.zeros((n, 3))
+    g = np.zeros((n, 3))
+    t = np.zeros((n, 3))
+    t[:, 0] = -1e5
+    tau = ct.coulomb_limit(t[:, 0], lw.cohesion, lw.tan_phi)
+    g[3:6, 1] = 2e-3
+    t[3:6, 1] = tau[3:6]
+    g[6:, 0], t[6:] = 1e-3, 0.0
+    t[:3, 1] = 0.5 * tau[:3]
+    for c in (1e3, 1e6, 1e9, 1e12):
+        lc = ct.FaceLaw(lw.area, lw.cohesion, lw.tan_phi, np.full(n, c), np.full(n, c))
+        st, r, _, _ = ct.lagrange_rows(lc, g, gp, t)
+        assert list(st) == [ct.STICK] * 3 + [ct.SLIP] * 3 + [ct.OPEN] * 3
+        assert np.abs(r).max() < 1e-9 * 1e5
+
+
+def test_residual_is_continuous_across_the_switches():
+    """Without cohesion r is continuous where a face changes state: stick/slip at |q| = tau and closed/open at
+    lam = 0 (a semismooth function, so Newton's steps see no jumps)."""
+    lw = ct.FaceLaw(np.full(2, 1.5), np.zeros(2), np.full(2, TAN30), np.full(2, 1e6), np.full(2, 0.7e6))
+    gp = np.zeros((2, 3))
+    # stick/slip: shear traction crossing the limit
+    t = np.array([[-1e5, 0, 0], [-1e5, 0, 0]], float)
+    tau = TAN30 * 1e5
+    g = np.zeros((2, 3))
+    t[0, 1], t[1, 1] = tau * (1 - 1e-9), tau * (1 + 1e-9)
+    st, r, _, _ = ct.lagrange_rows(lw, g, gp, t)
+    assert list(st) == [ct.STICK, ct.SLIP]
+    assert abs(r[0, 1] - r[1, 1]) < 1e-6 * tau
+    # closed/open: augmented normal traction crossing zero
+    t = np.array([[-1e-6, 50.0, 0], [1e-6, 50.0, 0]])
+    st, r, _, _ = ct.lagrange_rows(lw, g, gp, t)
+    assert st[0] != ct.OPEN and st[1] == ct.OPEN
+    assert np.abs(r[0] - r[1]).max() < 1e-3
+
+
+def test_fresh_fault_starts_closed():
+    """No traction, no jump: the face is closed and stuck (a glued fault), not open."""
+    lw = law(3)
+    z = np.zeros((3, 3))
+    assert list(ct.states(lw, z, z, z)) == [ct.STICK] * 3
 
 
 def test_penalty_derivatives_in_each_state():
@@ -88,22 +138,11 @@ def test_penalty_derivatives_in_each_state():
     g = RNG.normal(size=(n, 3)) * 1e-3
     gp = RNG.normal(size=(n, 3)) * 1e-3
     tp = RNG.normal(size=(n, 3)) * 1e4
-    kn = np.full(n, 1e9)
-    kt = np.full(n, 1e9)
-    coh = np.full(n, 1e3)
-    tanphi = np.full(n, 0.5)
-    t, d, state = ct.penalty_traction(g, gp, tp, kn, kt, coh, tanphi)
+    lw = ct.FaceLaw(np.ones(n), np.full(n, 1e3), np.full(n, 0.5), np.full(n, 1e9), np.full(n, 1e9))
+    t, d, state = ct.penalty_traction(lw, g, gp, tp)
     assert set(np.unique(state)) == {ct.STICK, ct.SLIP, ct.OPEN}
-    err = fd_check(lambda x: ct.penalty_traction(x, gp, tp, kn, kt, coh, tanphi)[0], g, d, h=1e-10)
+    err = fd_check(lambda x: ct.penalty_traction(lw, x, gp, tp)[0], g, d, h=1e-10)
     assert err < 1e-4
-
-
-def test_active_set_rules():
-    st = np.array([ct.STICK, ct.STICK, ct.STICK, ct.SLIP, ct.OPEN, ct.OPEN])
-    t = np.array([[-1e5, 1e4, 0], [-1e5, 1e5, 0], [1e3, 0, 0], [-1e5, 1e3, 0], [0, 0, 0], [0, 0, 0]], float)
-    g = np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0], [1e-3, 0, 0], [-1e-3, 0, 0]], float)
-    new = ct.update_states(st, t, g, np.zeros(6), np.full(6, np.tan(np.radians(30))), 1.0, 1e-9, 1e-3)
-    assert list(new) == [ct.STICK, ct.SLIP, ct.OPEN, ct.STICK, ct.OPEN, ct.STICK]
 
 
 def test_frames_are_orthonormal_and_right_handed():

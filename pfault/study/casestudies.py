@@ -61,7 +61,7 @@ CONVERGENCE_NOTE = (
     "8 a failed Newton solve was followed by the same one-face open->stick update again and again (residual "
     "4.605e+01 each time) until the 30 active-set updates were used up, about 3 hours (stopped by hand). "
     "0af418f bans a single-face change that Newton cannot solve for the rest of the step.")
-OPEN = 2                                   # fault face state code in fault.xdmf (pfault.physics.contact)
+OPEN = 2                                   # fault face state code in fault.xdmf (pfault.faults.contact)
 STAGES = ("Mesh", "Setup", "Solve", "Output")
 EVENTS = ("MatLUFactorNum", "MatLUFactorSym", "MatSolve", "KSPSolve", "PCSetUp", "SNESFunctionEval",
           "SNESJacobianEval", "pfaultFlowSolve", "pfaultFlowAssemble", "pfaultAssembleK")

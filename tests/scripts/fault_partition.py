@@ -4,7 +4,7 @@
     mpirun -n 2 python tests/scripts/fault_partition.py -pfault_box_cells 8,4,4
 
 Prints JSON {"ranks": N, "faces_per_rank": [...], "fault_faces": total}. A face belongs to the rank that
-owns its minus cell (pfault.solver.fault.FaultSystem); the 2-rank fault tests need faces on every rank.
+owns its minus cell (pfault.faults.interface.FaultInterface); the 2-rank fault tests need faces on every rank.
 """
 import json
 import sys

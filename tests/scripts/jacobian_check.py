@@ -9,10 +9,11 @@ contact configuration and measures, for h = 1e-2, 1e-3, 1e-4 and a direction v t
     e1(h) = ||F(x + h v) - F(x)||          (first order: ~ h)
     e2(h) = ||F(x + h v) - F(x) - h J v||  (Taylor remainder: ~ h^2 where F is nonlinear, round-off where affine)
 
-Cases: Lagrange faces forced to stick, slip (with a slip increment, and before any increment: the slip direction
-then follows the traction), open, and a mix of the three (face id mod 3); penalty faces in the stick, slip and
-open branches of the return map (selected by the jump; the branch of every face is checked not to change
-between x and x + h v). Prints one JSON line {case: {e1, e2, order1, order2, states, ...}}.
+Cases: Lagrange faces in the stick, slip (with a slip increment, and before any increment), open branches of the
+semismooth law and a mix of the three (face id mod 3), placed there by the multipliers and jumps of x; penalty
+faces in the stick, slip and open branches of the return map (selected by the jump). The branch of every face is
+checked not to change between x and x + h v (the test stays away from the kinks). Prints one JSON line
+{case: {e1, e2, order1, order2, states, ...}}.
 """
 import json
 import sys
@@ -25,7 +26,8 @@ import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
-from pfault.physics import contact as ct  # noqa: E402
+from pfault.faults import contact as ct  # noqa: E402
+from pfault.faults.interface import StepStart  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 H = (1e-2, 1e-3, 1e-4)
@@ -34,7 +36,7 @@ COMM = PETSc.COMM_WORLD
 
 def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noise=1e5):
     """x: small random displacement + a uniform jump `offset` (global) of the plus side of the fault, random
-    compressive multipliers; v: random, zero on Dirichlet rows."""
+    multipliers around t_mean (one row, or one row per owned face); v: random, zero on Dirichlet rows."""
     p, f, dm = sim.problem, sim.problem.faults, sim.dofmap
     x = p.u.duplicate()
     v = p.u.duplicate()
@@ -42,7 +44,8 @@ def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noi
     n = rend - rstart
     lm = (f.g_lm[f.lagrange].ravel() - rstart) if f.nf else np.zeros(0, np.int64)
     xa = rng.normal(size=n) * u_noise
-    xa[lm] = (np.asarray(t_mean)[None, :] + t_noise * rng.normal(size=(len(lm) // 3, 3))).ravel()
+    tm = np.asarray(t_mean).reshape(-1, 3)[np.flatnonzero(f.lagrange) if np.ndim(t_mean) > 1 else 0]
+    xa[lm] = (tm + t_noise * rng.normal(size=(len(lm) // 3, 3))).ravel()
     x.setArray(xa)
     # plus-side dofs of every split vertex (owned or ghost, the same value on every rank): add the offset
     loc = p.local_array(x)
@@ -57,13 +60,13 @@ def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noi
     return x, v
 
 
-def taylor(sim, x, v, check_states=False):
+def taylor(sim, x, v):
     p = sim.problem
     F0, Fh, Jv, xh = x.duplicate(), x.duplicate(), x.duplicate(), x.duplicate()
     p.residual(sim.snes, x, F0)
     p.jacobian(sim.snes, x, p.J, p.J)
     p.J.mult(v, Jv)
-    states0 = p.faults.current_states(p.local_array(x))
+    states0 = p.faults.states(p.local_array(x), exact=True)
     e1, e2, same = [], [], True
     for h in H:
         x.copy(xh)
@@ -73,8 +76,7 @@ def taylor(sim, x, v, check_states=False):
         e1.append(Fh.norm())
         Fh.axpy(-h, Jv)
         e2.append(Fh.norm())
-        if check_states:
-            same &= bool(np.array_equal(p.faults.current_states(p.local_array(xh)), states0))
+        same &= bool(np.array_equal(p.faults.states(p.local_array(xh), exact=True), states0))
     same = bool(COMM.tompi4py().allreduce(same, op=MPI.LAND))
     counts = np.bincount(states0, minlength=3) if len(states0) else np.zeros(3, np.int64)
     counts = COMM.tompi4py().allreduce(counts)
@@ -90,9 +92,16 @@ def taylor(sim, x, v, check_states=False):
 
 def set_history(f, rng, g_prev, t_prev):
     """Start-of-step jump and traction (local frame) of the owned faces; gathered copy for the stabilisation."""
-    f.g_prev = np.asarray(g_prev)[None, :] + 1e-4 * rng.normal(size=(f.nf, 3))
-    f.t_prev = np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.nf, 3))
-    f.t_prev_all = f.gather_faces(f.t_prev)
+    g = np.asarray(g_prev)[None, :] + 1e-4 * rng.normal(size=(f.nf, 3))
+    t = np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.nf, 3))
+    f.start = StepStart(g, t, f.gather_faces(t), np.zeros(f.nf, np.int64))
+
+
+# multipliers (local frame = global here: n = +x) and plus-side jumps that put a face in each branch: stuck
+# (compressed, shear inside the cone, no slip increment), slipping with an increment, slipping before any
+# increment (shear beyond the cone), open (an opening jump)
+T_STICK, T_SLIP, T_OPEN = (-1e6, 1e5, 5e4), (-1e6, 6e5, -5e5), (-1e5, 1e5, 0.0)
+G_PREV = (0.0, 1e-3, 2e-3)
 
 
 def lagrange_cases(results):
@@ -103,24 +112,18 @@ def lagrange_cases(results):
     rng = np.random.default_rng(1234 + COMM.rank)
     counts = COMM.tompi4py().allgather(f.nf)
     results["faces_per_rank"] = [int(c) for c in counts]
-    # jump offset (normal, 0, dip) in the local frame (n = +x: local = global components)
-    set_history(f, rng, g_prev=(0.0, 1e-3, 2e-3), t_prev=(-9e5, 1e4, 5e4))
-    x, v = make_vectors(sim, offset=(0.0, 0.0, 2e-2), rng=rng)
-    tol = f.slide_tol.copy()
-    for name, state in (("stick", ct.STICK), ("slip", ct.SLIP), ("open", ct.OPEN), ("mixed", None),
-                        ("slip_start", ct.SLIP)):
-        if state is None:
-            f.state[:] = f.face % 3         # serial face id: the same configuration at any rank count
-        else:
-            f.state[:] = state
-        # before the first slip increment the slip direction follows the traction: make every increment
-        # smaller than the sliding tolerance
-        f.slide_tol = np.full_like(tol, 1e3) if name == "slip_start" else tol
-        f._sync_state()
+    # the mixed case: one common jump (no opening, the start's slip) and the branch set by the multiplier alone
+    # (open: tensile), by serial face id: the same configuration at any rank count
+    mixed_t = np.array([T_STICK, T_SLIP, (2e5, 1e5, 0.0)])[f.face % 3]
+    for name, t_mean, offset in (("stick", T_STICK, (0.0, 1e-3, 2e-3)), ("slip", T_SLIP, (0.0, 2e-2, -2e-2)),
+                                 ("open", T_OPEN, (2e-2, 0.0, 0.0)), ("slip_start", T_SLIP, (0.0, 1e-3, 2e-3)),
+                                 ("mixed", mixed_t, None)):
+        set_history(f, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
+        x, v = make_vectors(sim, offset=(0.0, 1e-3, 2e-3) if offset is None else offset, rng=rng, t_mean=t_mean,
+                            t_noise=2e4)
         results["lagrange_" + name] = taylor(sim, x, v)
-    f.slide_tol = tol
-    x.destroy()
-    v.destroy()
+        x.destroy()
+        v.destroy()
     sim.destroy()
 
 
@@ -132,7 +135,7 @@ def penalty_cases(results):
     p, f = sim.problem, sim.problem.faults
     p.set_load(1.0)
     rng = np.random.default_rng(4321 + COMM.rank)
-    k = float(np.mean(f.kn)) if f.nf else 0.0
+    k = float(np.mean(f.penalty_law.c_n)) if f.nf else 0.0
     results["penalty_stiffness"] = COMM.tompi4py().allgather(k)
     # t_N = k g_N, tau_L = tan(phi) |t_N|; trial shear = t_T^n + k (g_T - g_T^n)
     for name, offset, g_prev, t_prev in (
@@ -141,7 +144,7 @@ def penalty_cases(results):
             ("open", (1e-2, 0.0, 3e-2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))):
         set_history(f, rng, g_prev, t_prev)
         x, v = make_vectors(sim, offset=offset, rng=rng)
-        results["penalty_" + name] = taylor(sim, x, v, check_states=True)
+        results["penalty_" + name] = taylor(sim, x, v)
         x.destroy()
         v.destroy()
     sim.destroy()

@@ -19,7 +19,7 @@ from pfault.mesh.box import box_mesh  # noqa: E402
 from pfault.physics import elasticity as el  # noqa: E402
 from pfault.physics.loading import MaterialDrawdown  # noqa: E402
 from pfault.scene import Material  # noqa: E402
-from pfault.solver.problem import ElasticProblem  # noqa: E402
+from pfault.solver.problem import Problem as ElasticProblem  # noqa: E402
 
 E, NU = 1.0e7, 0.3
 C = np.array([1.0, -0.5, 0.75]) * 1e-2

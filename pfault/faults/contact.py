@@ -1,0 +1,155 @@
+"""Contact and Mohr-Coulomb friction per fault face, vectorised over faces (pure NumPy).
+
+Conventions
+- n: unit normal of a fault face pointing from the minus side to the plus side; R (3x3) has rows
+  (n, m1, m2): local frame normal, strike-like and dip-like tangents.
+- jump g = u_plus - u_minus (face average of the P1 jump); local g_loc = R g; g_N > 0 is opening.
+- traction t (local): the traction the plus side exerts on the minus side; t_N < 0 is compression. The
+  laws act on the effective traction (t_N + alpha p for a wet fault).
+- Mohr-Coulomb: |t_T| <= tau_L = c - t_N tan(phi).
+
+Lagrange faces: one semismooth complementarity residual per face (Alart-Curnier, the projection form of
+Hueber, Stadler & Wohlmuth), with the augmented normal traction lam = t_N + c_N g_N and the augmented
+tangential traction q = t_T + c_T dg_T (dg_T = g_T - g_T^n, the slip of the step):
+
+    r_N = A (t_N - min(0, lam))                  closed (lam <= 0): -A c_N g_N;  open: A t_N
+    r_T = A (t_T - P_tau(q)),  tau = max(0, c - tan(phi) lam)   on closed faces, 0 on open ones
+
+P_tau projects onto the disc of radius tau: stick (|q| <= tau) r_T = -A c_T dg_T; slip r_T = A (t_T - tau q/|q|),
+which at a solution is the maximum-dissipation law (dg_T parallel to t_T, |t_T| = tau). The state of each face
+is read from the iterate inside every evaluation; r is continuous across stick/slip and, without cohesion,
+across closed/open. The rows are forces (Pa m^2), like the displacement rows. The solution does not depend on
+c_N, c_T > 0 (stiffnesses, Pa/m: E/h of the face's cell); they only decide which branch Newton takes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+STICK, SLIP, OPEN = 0, 1, 2
+STATE_NAMES = ("stick", "slip", "open")
+
+
+@dataclass(frozen=True)
+class FaceLaw:
+    """Per-face parameters of a contact law (arrays of the same length)."""
+    area: np.ndarray        # m^2
+    cohesion: np.ndarray    # Pa
+    tan_phi: np.ndarray
+    c_n: np.ndarray         # normal stiffness (Pa/m): augmentation (Lagrange) or penalty
+    c_t: np.ndarray         # tangential stiffness (Pa/m)
+
+    def __getitem__(self, idx):
+        return FaceLaw(*(getattr(self, f.name)[idx] for f in fields(self)))
+
+    def __len__(self):
+        return len(self.area)
+
+
+def local_frames(normal):
+    """Rotation matrices (nf,3,3) with rows n, m1, m2; m1 horizontal (strike) unless n is near vertical."""
+    n = normal / np.linalg.norm(normal, axis=1)[:, None]
+    ref = np.where(np.abs(n[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
+    m1 = np.cross(ref, n)
+    m1 /= np.linalg.norm(m1, axis=1)[:, None]
+    m2 = np.cross(n, m1)
+    return np.stack([n, m1, m2], axis=1)
+
+
+def coulomb_limit(t_n, cohesion, tan_phi):
+    return np.maximum(cohesion - tan_phi * t_n, 0.0)
+
+
+def states(law, g, g_prev, t, tol=0.0):
+    """Stick/slip/open of each face at the iterate (g, t): the branch of the semismooth residual. With tol > 0
+    (Pa) a face within tol of a switch is reported in the branch that holds it in place (closed, stuck): at zero
+    traction and zero jump a face is at once open, slipping and stuck, and round-off must not pick one."""
+    lam = t[:, 0] + law.c_n * g[:, 0]
+    closed = lam <= tol        # a face without traction and jump (a fresh fault) starts closed
+    tau = np.where(closed, coulomb_limit(np.minimum(lam, 0.0), law.cohesion, law.tan_phi), 0.0)
+    q = t[:, 1:] + law.c_t[:, None] * (g[:, 1:] - g_prev[:, 1:])
+    slip = closed & (np.linalg.norm(q, axis=1) > tau + tol)
+    return np.where(closed, np.where(slip, SLIP, STICK), OPEN)
+
+
+def lagrange_rows(law, g, g_prev, t, state=None):
+    """Semismooth residual rows r (nf,3) of the faces, their state, and the generalised derivatives
+    d r/d g (nf,3,3) and d r/d t (nf,3,3) (local frame; t the effective traction). ``state``: the branches to
+    take instead of the iterate's (stick or open only: the linear elastic trial of a step)."""
+    nf = len(law)
+    A, cn, ct_ = law.area, law.c_n, law.c_t
+    st = states(law, g, g_prev, t) if state is None else np.asarray(state)
+    r = np.zeros((nf, 3))
+    dg = np.zeros((nf, 3, 3))
+    dt = np.zeros((nf, 3, 3))
+    opn = st == OPEN
+    closed = ~opn
+    # normal: closed -A c_N g_N, open A t_N
+    r[closed, 0] = -cn[closed] * g[closed, 0]
+    dg[closed, 0, 0] = -cn[closed]
+    r[opn] = t[opn]
+    dt[opn] = np.eye(3)[None]
+    # stick: -A c_T dg_T
+    stick = st == STICK
+    r[stick, 1:] = -ct_[stick, None] * (g[stick, 1:] - g_prev[stick, 1:])
+    dg[stick, 1, 1] = dg[stick, 2, 2] = -ct_[stick]
+    i = np.nonzero(st == SLIP)[0]
+    if len(i):
+        lam = t[i, 0] + cn[i] * g[i, 0]
+        raw = law.cohesion[i] - law.tan_phi[i] * lam
+        tau = np.maximum(raw, 0.0)
+        dtau = np.where(raw > 0, -law.tan_phi[i], 0.0)            # d tau / d lam
+        q = t[i, 1:] + ct_[i, None] * (g[i, 1:] - g_prev[i, 1:])
+        qn = np.linalg.norm(q, axis=1)                              # > tau >= 0 on a slipping face
+        s = q / qn[:, None]
+        proj = (np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)) / qn[:, None, None]    # d s / d q
+        r[i, 1:] = t[i, 1:] - tau[:, None] * s
+        dt[i, 1:, 1:] = np.eye(2)[None] - tau[:, None, None] * proj
+        dg[i, 1:, 1:] = -(tau * ct_[i])[:, None, None] * proj
+        dt[i, 1:, 0] = -dtau[:, None] * s
+        dg[i, 1:, 0] = -(dtau * cn[i])[:, None] * s
+    return st, r * A[:, None], dg * A[:, None, None], dt * A[:, None, None]
+
+
+def penalty_traction(law, g, g_prev, t_prev, t0_n=None):
+    """Penalty contact: traction (nf,3), derivative dt/dg (nf,3,3) and state.
+
+    t_N = t0_N + c_N g_N while in contact (t_N <= 0), 0 when open; tangential return map from
+    t_T^n + c_T dg_T. t0_N is the initial (effective) normal traction, 0 by default.
+    """
+    nf = len(g)
+    kn, kt = law.c_n, law.c_t
+    t = np.zeros((nf, 3))
+    d = np.zeros((nf, 3, 3))
+    state = np.full(nf, OPEN)
+    t0n = np.zeros(nf) if t0_n is None else t0_n
+    tn_trial = t0n + kn * g[:, 0]
+    closed = tn_trial <= 0
+    t[closed, 0] = tn_trial[closed]
+    d[closed, 0, 0] = kn[closed]
+    trial = t_prev[:, 1:] + kt[:, None] * (g[:, 1:] - g_prev[:, 1:])
+    tau = coulomb_limit(t[:, 0], law.cohesion, law.tan_phi)
+    dtau_dtn = np.where(law.cohesion - law.tan_phi * t[:, 0] > 0, -law.tan_phi, 0.0)
+    tn = np.linalg.norm(trial, axis=1)
+    stick = closed & (tn <= tau)
+    slip = closed & ~stick
+    t[stick, 1:] = trial[stick]
+    d[stick, 1, 1] = d[stick, 2, 2] = kt[stick]
+    state[stick] = STICK
+    if np.any(slip):
+        s = trial[slip] / tn[slip, None]
+        t[slip, 1:] = tau[slip, None] * s
+        proj = np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)
+        d[slip, 1:, 1:] = (tau[slip] * kt[slip] / tn[slip])[:, None, None] * proj
+        d[slip, 1:, 0] = (dtau_dtn[slip] * kn[slip])[:, None] * s
+        state[slip] = SLIP
+    return t, d, state
+
+
+def transition_counts(old, new):
+    """3x3 table: counts[i, j] faces going from state i to state j."""
+    c = np.zeros((3, 3), dtype=np.int64)
+    np.add.at(c, (old, new), 1)
+    return c

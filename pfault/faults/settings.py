@@ -1,0 +1,25 @@
+"""What a scene asks of its faults: per-fault friction and enforcement, and the contact law's physical choices."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class FaultSettings:
+    """One fault (a physical surface of the mesh)."""
+    name: str
+    cohesion: float                # Pa
+    friction_angle: float          # degrees
+    method: str                    # lagrange | penalty
+    stabilization: bool
+    penalty_normal: float          # Pa/m (0: automatic from the adjacent cells)
+    penalty_tangential: float
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """Physical choices of the contact law shared by all faults, and the monitor switch."""
+    effective_stress: bool = True  # friction and opening act on t_N + alpha p
+    suction: bool = False          # geostatic scenes: keep negative pore pressure on dry faces
+    monitor: bool = False          # one line per Newton iteration with the faces' states
