@@ -85,13 +85,13 @@ class FaultInterface:
         self.has_lagrange = any(s.method == "lagrange" for s in settings)
         self.h = np.sqrt(self.area)
         self.young = np.array([m.young_modulus for m in materials])[mesh.cell_material[self.cell]]
-        self.law, self.penalty_law = self._laws(topology.young[self.face])
         self.t0 = np.zeros((nf, 3))         # initial (prestress) traction, local; loads nothing
         self.pn = np.zeros(nf)              # alpha p at the face: effective traction = t + (pn, 0, 0)
         self._setup_gather()
         stab = np.array([s.stabilization and s.method == "lagrange" for s in settings])
         keep = stab[fault_id[pairs[:, 0]]] if len(pairs) else np.zeros(0, bool)
         self.pairs, self.pair_S = pairs[keep], pair_S[keep]
+        self.law, self.penalty_law = self._laws(topology.young[self.face])
         self.pos = np.full(self.nf_total, -1)
         self.pos[self.face] = np.arange(nf)
         self.start = StepStart(np.zeros((nf, 3)), np.zeros((nf, 3)), np.zeros((self.nf_total, 3)),
@@ -119,12 +119,26 @@ class FaultInterface:
         self.u_mask = ~bc_local[self.u_dofs] if nf else np.zeros((0, 18), bool)       # constrained dofs get no force
 
     def _laws(self, face_young):
-        """Per-face law parameters: the Lagrange law's augmentation E/h with E the harmonic mean of the two
-        sides' moduli, and the penalty stiffness, E/h of the minus cell unless given."""
+        """Per-face law parameters: the Lagrange law's augmentation, and the penalty stiffness (E/h of the minus
+        cell unless given).
+
+        The augmentation is E/h with E the harmonic mean of the two sides' moduli, capped where the
+        stabilisation needs it: the law's argument t + c g_stab, with g_stab = g + S_f (dt_nb - dt) / A,
+        decreases with the face's own traction once c S_f / A > 1, and a state can then have no solution
+        (measured on Wuxi: c S_f / A = 3 to 6 at E/h, and Newton cycles between open and closed at the opening front
+        or flips a slip direction every iteration). The cap c <= A / (2 lambda_max(S_f)) keeps it increasing;
+        the solution does not depend on c."""
         coh = np.array([s.cohesion for s in self.settings])[self.fault]
         tphi = np.tan(np.radians([s.friction_angle for s in self.settings]))[self.fault]
         h = np.maximum(self.h, 1e-300)
         c = face_young / h
+        if len(self.pairs):
+            # S_f: the sum of the face's stabilisation matrices
+            S_f = np.zeros((self.nf_total, 3, 3))
+            np.add.at(S_f, self.pairs[:, 0], self.pair_S)
+            np.add.at(S_f, self.pairs[:, 1], self.pair_S)
+            lam = np.linalg.eigvalsh(S_f[self.face])[:, -1] / np.maximum(self.area, 1e-300)
+            c = np.where(lam > 0, np.minimum(c, 0.5 / np.maximum(lam, 1e-300)), c)
         law = ct.FaceLaw(self.area, coh, tphi, c, c)
         k = self.young / h
         kn = np.array([s.penalty_normal for s in self.settings])[self.fault]
@@ -213,10 +227,11 @@ class FaultInterface:
         gl = self.jumps(x_loc)[1]
         t = self.tractions(x_loc, gl)
         st = self._penalty(gl)[2]
+        gs = self._stabilised(x_loc, gl, t)[0] if self.has_lagrange else gl
         lag = self.lagrange
         if np.any(lag):
             tol = 0.0 if exact else 1e-9 * self.young[lag]
-            st[lag] = ct.states(self.law[lag], gl[lag], self.start.g[lag], self.effective(t)[lag], tol)
+            st[lag] = ct.states(self.law[lag], gs[lag], self.start.g[lag], self.effective(t)[lag], tol)
         return st
 
     def counts_by_state(self, x_loc):
@@ -225,30 +240,33 @@ class FaultInterface:
         return {name: int(c[i]) for i, name in enumerate(ct.STATE_NAMES)}
 
     # -- residual and Jacobian ------------------------------------------------------------------
+    def _stabilised(self, x_loc, gl, t):
+        """Stabilised local jumps of the owned faces (g + S (dt_b - dt_a) / A) and the stabilisation blocks
+        [(owned index, rows, cols, d(A g_stab)/dt)]; ``t``: total tractions of the owned faces."""
+        if not len(self.pairs):
+            return gl, []
+        dt_all = self.gather_faces(t) - self.start.t_all
+        rs, blocks = stabilization_rows(self.pairs, self.pair_S, self.pos, dt_all, self.all_g_lm)
+        return gl + rs / np.maximum(self.area, 1e-300)[:, None], blocks
+
     def _lagrange_terms(self, x_loc, state=None):
-        """Owned Lagrange faces: (indices, states, rows, dr/dg, dr/dt, stabilisation blocks). The rows are
-        the semismooth law's plus the stabilisation of their constrained components, scaled like them.
+        """Owned Lagrange faces: (indices, states, rows, dr/dg, dr/dt, stabilisation blocks). The law takes the
+        stabilised jump; its derivative reaches the neighbours' multipliers through the stabilisation blocks.
         ``state`` (owned faces): the branches to take instead of the iterate's (stick or open)."""
         gl = self.jumps(x_loc)[1]
+        t = self.tractions(x_loc, gl)
+        gs, sblocks = self._stabilised(x_loc, gl, t)
         idx = np.nonzero(self.lagrange)[0]
-        t = x_loc[self.lm_dofs[idx]] if len(idx) else np.zeros((0, 3))
-        te = t.copy()
-        te[:, 0] += self.pn[idx]
-        st, r, dg, dt = ct.lagrange_rows(self.law[idx], gl[idx], self.start.g[idx], te,
+        st, r, dg, dt = ct.lagrange_rows(self.law[idx], gs[idx], self.start.g[idx], self.effective(t)[idx],
                                          None if state is None else state[idx])
+        # d r / d t_b = (d r / d g_stab) S_ab / A of the row face (dg is dr/dg_stab)
+        drdgs = np.zeros((self.nf, 3, 3))
+        drdgs[idx] = dg / np.maximum(self.area[idx], 1e-300)[:, None, None]
         blocks = []
-        if len(self.pairs):
-            state = np.full(self.nf, ct.OPEN)
-            state[idx] = st
-            tt = np.zeros((self.nf, 3))
-            tt[idx] = t
-            state_all = self.gather_faces(state.astype(float)).ravel().astype(np.int64)
-            dt_all = self.gather_faces(tt) - self.start.t_all
-            rs, blocks = stabilization_rows(self.pairs, self.pair_S, self.pos, state_all, dt_all, self.all_g_lm)
-            # the law's constraint rows are -c (A g); the stabilisation enters them as -c (A g + S dt)
-            scale = -np.column_stack([self.law.c_n, self.law.c_t, self.law.c_t])
-            r += (scale * rs)[idx]
-            blocks = [(rows, cols, vals * scale[own][:, :, None]) for own, rows, cols, vals in blocks]
+        for own, rows, cols, vals in sblocks:
+            keep = self.lagrange[own]
+            if np.any(keep):
+                blocks.append((rows[keep], cols[keep], np.einsum("nij,njk->nik", drdgs[own[keep]], vals[keep])))
         return idx, st, r, dg, dt, blocks
 
     def residual(self, x_loc, out, state=None):

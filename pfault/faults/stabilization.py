@@ -2,8 +2,9 @@
 
 Following Franceschini, Castelletto, White & Tchelepi (CMAME 2020): the constraint rows of two fault faces
 sharing an edge are coupled through S (their traction increments' difference), with S built from the local
-stiffness, so no user coefficient enters. Only constrained components are coupled: all three of a stuck face,
-the normal one of a slipping face, none of an open face.
+stiffness, so no user coefficient enters. The coupling enters the contact law through its jump argument
+(the stabilised jump A g + S (dt_b - dt_a)), so it acts on the components the face's state constrains:
+all three of a stuck face, the normal one of a slipping face, none of an open face.
 """
 
 from __future__ import annotations
@@ -62,11 +63,13 @@ def stabilization_pairs(serial, split, materials, scale=1.0):
     return np.column_stack([f0, f1]), S * areafac[:, None, None]
 
 
-def stabilization_rows(pairs, S, pos, state_all, dt_all, g_lm_all):
-    """Stabilisation of the constraint rows of this rank's faces, in jump units (m^3, the unscaled rows
-    A g + S (dt_b - dt_a)): rows (nf,3) of the owned faces (``pos``: serial face -> owned index or -1) and the
-    matrix blocks [(owned index of the row face, row dofs, col dofs, values (n,3,3))] for the Jacobian. ``dt_all`` are the traction
-    increments of the step of all faces (serial order), ``state_all`` their states."""
+def stabilization_rows(pairs, S, pos, dt_all, g_lm_all):
+    """Stabilisation of this rank's faces, in jump units (m^3): the terms S (dt_b - dt_a) that the stabilised
+    jump A g + S (dt_b - dt_a) of each owned face adds (``pos``: serial face -> owned index or -1), and their
+    derivatives as blocks [(owned index of the face, row dofs, col dofs, d/dt (n,3,3))]. ``dt_all``: the
+    traction increments of the step of all faces (serial order). Every component of every pair is coupled,
+    whatever the faces' states: the contact law takes the stabilised jump as its argument, so its residual
+    stays continuous where a face or its neighbour changes state."""
     nf = int(np.count_nonzero(pos >= 0))
     r = np.zeros((nf, 3))
     blocks = []
@@ -76,15 +79,10 @@ def stabilization_rows(pairs, S, pos, state_all, dt_all, g_lm_all):
         if not np.any(mine):
             continue
         fa, fb, Sm = fa[mine], fb[mine], S[mine]
-        na, nb = N_CONSTRAINED[state_all[fa]], N_CONSTRAINED[state_all[fb]]
-        rowmask = np.arange(3)[None, :] < na[:, None]
-        colmask = np.arange(3)[None, :] < nb[:, None]
-        Saa = -Sm * rowmask[:, :, None] * rowmask[:, None, :]
-        Sab = Sm * rowmask[:, :, None] * colmask[:, None, :]
-        contrib = np.einsum("nij,nj->ni", Saa, dt_all[fa]) + np.einsum("nij,nj->ni", Sab, dt_all[fb])
+        contrib = np.einsum("nij,nj->ni", Sm, dt_all[fb] - dt_all[fa])
         np.add.at(r, pos[fa], contrib)
-        blocks.append((pos[fa], g_lm_all[fa], g_lm_all[fa], Saa))
-        blocks.append((pos[fa], g_lm_all[fa], g_lm_all[fb], Sab))
+        blocks.append((pos[fa], g_lm_all[fa], g_lm_all[fa], -Sm))
+        blocks.append((pos[fa], g_lm_all[fa], g_lm_all[fb], Sm))
     return r, blocks
 
 

@@ -114,9 +114,9 @@ def lagrange_cases(results):
     results["faces_per_rank"] = [int(c) for c in counts]
     # the mixed case: one common jump (no opening, the start's slip) and the branch set by the multiplier alone
     # (open: tensile), by serial face id: the same configuration at any rank count
-    mixed_t = np.array([T_STICK, T_SLIP, (2e5, 1e5, 0.0)])[f.face % 3]
+    mixed_t = np.array([T_STICK, T_SLIP, (5e6, 1e5, 0.0)])[f.face % 3]
     for name, t_mean, offset in (("stick", T_STICK, (0.0, 1e-3, 2e-3)), ("slip", T_SLIP, (0.0, 2e-2, -2e-2)),
-                                 ("open", T_OPEN, (2e-2, 0.0, 0.0)), ("slip_start", T_SLIP, (0.0, 1e-3, 2e-3)),
+                                 ("open", T_OPEN, (2e-1, 0.0, 0.0)), ("slip_start", T_SLIP, (0.0, 1e-3, 2e-3)),
                                  ("mixed", mixed_t, None)):
         set_history(f, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
         x, v = make_vectors(sim, offset=(0.0, 1e-3, 2e-3) if offset is None else offset, rng=rng, t_mean=t_mean,
