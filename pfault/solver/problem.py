@@ -16,6 +16,11 @@ from petsc4py import PETSc
 from .setup import apply_solver_defaults, rigid_body_modes
 
 
+def factorizations():
+    """Numeric factorisations so far on this rank (PETSc's log events; 0 unless logging is on)."""
+    return sum(PETSc.Log.Event(name).getPerfInfo()["count"] for name in ("MatLUFactorNum", "MatCholFctrNum"))
+
+
 def constrained_local(mesh, dofmap):
     """Boolean mask of the local dofs fixed by Dirichlet conditions."""
     mask = mesh.vert_data[:, 0]
@@ -72,7 +77,9 @@ class Problem:
         self._dp_interval = None
         self._jacobian_key = None       # faces' states of the assembled J while it depends on nothing else
         self._trial = None              # faces' states of a step's elastic trial while it is solved
-        self.n_factorizations = 0
+        self.n_jacobians = 0             # interface Jacobians assembled (a configuration seen before is kept)
+        if faults is not None:
+            PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
         # boundary loads per surface, scaled by the surface's history at each time
         self.surface_loads = []
         for i, b in enumerate(boundaries):
@@ -247,7 +254,6 @@ class Problem:
                 A.copy(self.P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         ksp.setOperators(A, self.P if self.faults is not None else A)
         ksp.solve(self.f, ug)
-        self.n_factorizations += self.faults is not None
 
     def _start_faults(self, sigma0):
         """The faults carry the initial stress: their tractions start from it and only the change loads."""
@@ -291,7 +297,7 @@ class Problem:
             f.add_jacobian(x_loc, J, self._trial)
             J.assemble()
             self._jacobian_key = None if varies else state
-            self.n_factorizations += 1
+            self.n_jacobians += 1
             if P.handle != J.handle:
                 J.copy(P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
                 f.add_augmentation(P, state)
@@ -342,7 +348,7 @@ class Problem:
         starts from its elastic trial (one linear solve with the closed faces stuck and the open ones open,
         counted as its first Newton iteration), from which SNES runs the semismooth Newton."""
         t0 = time.perf_counter()
-        nfact = self.n_factorizations
+        nfact, njac = (factorizations() if self.faults is not None else 0), self.n_jacobians
         trial = None
         if self.faults is not None:
             self.faults.begin_step(self.local_array(self.u))     # under the pore pressure it was solved for
@@ -359,7 +365,8 @@ class Problem:
         if self.faults is not None:
             rec["newton_its"] += 1
             rec["ksp_its"] += trial[1]
-            rec["factorizations"] = int(self.n_factorizations - nfact)
+            rec["factorizations"] = int(factorizations() - nfact)
+            rec["jacobians"] = int(self.n_jacobians - njac)
             rec["residual_history"] = [trial[0]] + [float(v) for v in snes.getConvergenceHistory()[0][:its + 1]]
             rec.update(self.faults.counts_by_state(self.local_array(self.u)))
         return rec
@@ -424,7 +431,7 @@ class Problem:
             self._dp_interval = None
             u0.destroy()
         rec = dict(rec)
-        for key in ("newton_its", "ksp_its", "wall_s", "factorizations"):
+        for key in ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians"):
             rec[key] = sum(r.get(key, 0) for r in tried)
         rec["time_s"] = float(t)
         rec["substeps"] = 2 ** cuts

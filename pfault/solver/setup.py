@@ -62,7 +62,7 @@ def apply_solver_file(name, scene_file=""):
         return None
     path = find_solver_file(name, scene_file)
     opts = PETSc.Options()
-    user_chose_pc = opts.hasName("pc_type") or opts.hasName("ksp_type")
+    user_chose_pc = opts.hasName("pc_type")     # (a Krylov method chosen alone keeps the file's preconditioner)
     for key, value in read_options_file(path):
         if user_chose_pc and (key.startswith("pc_") or key.startswith("mat_mumps") or key.startswith("mg_")):
             continue  # a solver chosen explicitly does not inherit another solver's settings
@@ -87,13 +87,15 @@ def apply_solver_defaults(linear=False):
         set_default("snes_atol", "1e-12")
     else:
         set_default("snes_stol", "0")
-        # full semismooth Newton steps: on the Wuxi opening front (paper size, year 2) they converge in 17
-        # iterations, where backtracking (bt) stalls in a kink of |F|, and l2 and nleqerr need over 40
+        # full semismooth Newton steps (paper-size Wuxi: 23 iterations over 10 steps)
         set_default("snes_linesearch_type", "basic")
-    if not (opts.hasName("ksp_type") or opts.hasName("pc_type")):
+    if not opts.hasName("pc_type"):
         set_default("pc_type", "lu")
         set_default("pc_factor_mat_solver_type", "mumps")
     if is_direct() and not opts.hasName("ksp_type"):
+        # one factorisation per Newton iteration whose Jacobian changed. Reusing it as GMRES's preconditioner
+        # for three iterations (-ksp_type gmres -snes_lag_preconditioner 3) was slower: calibrated Queretaro
+        # 216 s against 98 s, 160-320 MUMPS triangular solves per step at 0.14 s each on 2 ranks
         set_default("ksp_type", "preonly")
     set_default("snes_rtol", "1e-10")
     set_default("snes_max_it", "50")
