@@ -1,0 +1,59 @@
+"""A scene no solver setting was tuned for: a 60-degree normal fault bounding a sedimentary basin, drawdown in the
+hanging wall (config/basin_fault.opts on a coarse mesh from benchmarks/basin_fault_mesh.py)."""
+
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+from conftest import PY, REPO, read_last_step, run_scene
+
+
+@pytest.fixture(scope="module")
+def basin(tmp_path_factory):
+    d = tmp_path_factory.mktemp("basin")
+    msh = str(d / "basin.msh")
+    subprocess.run([PY, os.path.join("benchmarks", "basin_fault_mesh.py"), msh, "--size", "250"], cwd=REPO,
+                   check=True, capture_output=True, timeout=300)
+    out = {}
+    for ranks in (1, 2):
+        _, s = run_scene("config/basin_fault.opts", d / f"out{ranks}", ranks=ranks,
+                         extra=["-pfault_mesh_file", msh])
+        out[ranks] = (s, d / f"out{ranks}")
+    return out
+
+
+def test_every_step_converges_without_substeps(basin):
+    """Full Newton steps from the scene's defaults: every step converges, none is cut, at most 15 iterations."""
+    s, _ = basin[2]
+    steps = [st for st in s["steps"] if st["time_s"] > 0]
+    assert len(steps) == 10
+    for st in steps:
+        assert st["converged"] and st.get("substeps", 1) == 1, st
+        assert st["newton_its"] <= 15, st
+    assert steps[-1]["slip"] > 0                      # the fault slides
+
+
+def test_hanging_wall_subsides_against_the_footwall(basin):
+    """Normal-fault kinematics: the drained sediments pull the hanging wall down; the land surface steps down across
+    the fault trace (x = 1200 m) by about the fault's dip slip times sin(60 degrees)."""
+    s, out = basin[2]
+    points, _, pd, _ = read_last_step(out)
+    u = pd["displacement"]
+    top = np.abs(points[:, 2]) < 1e-6
+    x = points[:, 0]
+    hanging = top & (x > 1300) & (x < 1600)
+    foot = top & (x > 800) & (x < 1100)
+    step = u[foot, 2].mean() - u[hanging, 2].mean()
+    assert step > 0.5, step
+    slip = s["max_fault_slip_m"]
+    dip_throw = slip * np.sin(np.radians(60))        # measured: step 4.30 m, slip 5.03 m (throw 4.36 m)
+    assert 0.8 * dip_throw < step < 1.1 * dip_throw, (step, slip)
+
+
+def test_one_and_two_ranks_agree(basin):
+    s1, _ = basin[1]
+    s2, _ = basin[2]
+    for key in ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m"):
+        assert s2[key] == pytest.approx(s1[key], rel=1e-6), key
