@@ -13,6 +13,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..faults import contact as ct
 from .setup import apply_solver_defaults, rigid_body_modes
 
 
@@ -252,6 +253,9 @@ class Problem:
             self._jacobian_key = None
             if self.P is not self.J:
                 A.copy(self.P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            elif not self.faults.jacobian_varies(np.full(self.faults.nf, ct.STICK)):
+                # the Jacobian of every face stuck: a first step that starts so keeps this factorisation
+                self._jacobian_key = np.full(self.faults.nf, ct.STICK)
         ksp.setOperators(A, self.P if self.faults is not None else A)
         ksp.solve(self.f, ug)
 
