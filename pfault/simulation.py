@@ -10,6 +10,8 @@ from petsc4py import PETSc
 
 from . import fields, scene as scn
 from .assembly.elastic import ElasticAssembler
+from .effects import EffectCosts, logged
+from .effects import decide as decide_effects
 from .errors import InputError, run_on_root
 from .mesh import distributed
 from .options import OptionReader, check_unused_petsc_options
@@ -45,6 +47,7 @@ class Simulation:
     # ------------------------------------------------------------------------------------------
     def setup(self):
         comm, reader = self.comm, self.reader
+        self.costs = EffectCosts(comm)
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Mesh")
         stage.push()
@@ -70,6 +73,9 @@ class Simulation:
         self.boundaries = scn.read_boundaries(reader, self.surface_names, exclude=fault_names)
         self.contact = scn.read_contact_options(reader) if fault_names else None
         reader.check_pfault_options()
+        self.effects = decide_effects(s, self.materials, self.drawdown, self.flow_settings is not None,
+                                      self.fault_settings, self.boundaries)
+        _print("pfault:", self.effects.line())
 
         def arrays():
             out = scn.boundary_arrays(serial, self.boundaries, s.ground_surface)
@@ -120,10 +126,12 @@ class Simulation:
                                         substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity)
             self.drawdown = self.flow
         faults = None
-        if self.fault_settings:
+        if self.effects.faults:
             from .faults.interface import FaultInterface
-            faults = FaultInterface(self.mesh, self.dofmap, self.fault_settings, self.fault_topology, self.materials, constrained_local(self.mesh, self.dofmap),
-                                    self.mesh.dm.getLGMap(), self.contact)
+            with logged("pfaultFaultSetup"):
+                faults = FaultInterface(self.mesh, self.dofmap, self.fault_settings, self.fault_topology,
+                                        self.materials, constrained_local(self.mesh, self.dofmap),
+                                        self.mesh.dm.getLGMap(), self.contact)
         self.problem = Problem(self.mesh, self.dofmap, self.asm, self.boundaries, self.drawdown, s, faults,
                                self.contact)
         self.snes = self.problem.create_snes()
@@ -231,7 +239,8 @@ class Simulation:
         if s.geostatic:
             solve_stage.push()
             t0 = time.perf_counter()
-            p.geostatic_prestress(self.snes)
+            with logged("pfaultGeostatic"):
+                p.geostatic_prestress(self.snes)
             p.u.copy(p.u_ref)
             rec = {"time_s": 0.0, "newton_its": 0, "ksp_its": 0, "wall_s": time.perf_counter() - t0,
                    "converged": True, "initial": True}
@@ -241,6 +250,7 @@ class Simulation:
             self.wall["solve"] += rec["wall_s"]
             steps.append(rec)
             self._progress(0, rec)
+        self.costs.mark_setup()
         converged = True
         for step in range(1, s.time_steps + 1):
             t = times[step]
@@ -319,6 +329,7 @@ class Simulation:
             "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
             "converged": bool(converged),
+            "effects": self.costs.record(self.effects, len([r for r in steps if not r.get("initial")])),
         }
         return self.summary
 

@@ -18,6 +18,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..effects import logged
 from ..mesh.serial import TET_FACES
 from ..physics import elasticity as el
 from . import contact as ct
@@ -272,6 +273,10 @@ class FaultInterface:
     def residual(self, x_loc, out, state=None):
         """Add the interface terms to the local residual array ``out``; returns the owned faces' states.
         ``state``: Lagrange faces' branches to take instead of the iterate's (stick or open)."""
+        with logged("pfaultFaultResidual"):
+            return self._residual(x_loc, out, state)
+
+    def _residual(self, x_loc, out, state):
         gl = self.jumps(x_loc)[1]
         t = self.tractions(x_loc, gl)
         # forces on the displacement dofs from the traction change (the initial traction is in equilibrium
@@ -290,6 +295,10 @@ class FaultInterface:
         """Add the interface blocks to J (global indices); returns the owned faces' states. ``state``: Lagrange
         faces' branches to take instead of the iterate's (stick or open); ``glued``: every face stuck whatever
         x_loc (the penalty and Lagrange laws' stick branches)."""
+        with logged("pfaultFaultJacobian"):
+            return self._add_jacobian(x_loc, J, state, glued)
+
+    def _add_jacobian(self, x_loc, J, state, glued):
         gl = self.jumps(x_loc)[1]
         _, d, out_state = self._penalty(gl)
         if glued:

@@ -13,13 +13,14 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..effects import event_total, logged
 from ..faults import contact as ct
 from .setup import apply_solver_defaults, rigid_body_modes
 
 
 def factorizations():
     """Numeric factorisations so far on this rank (PETSc's log events; 0 unless logging is on)."""
-    return sum(PETSc.Log.Event(name).getPerfInfo()["count"] for name in ("MatLUFactorNum", "MatCholFctrNum"))
+    return int(sum(event_total(name, "count") for name in ("MatLUFactorNum", "MatCholFctrNum")))
 
 
 def constrained_local(mesh, dofmap):
@@ -55,7 +56,8 @@ class Problem:
         t0 = time.perf_counter()
         self.K = self._build_operator()
         self.bc_rows = self._constrained_rows()
-        self.lifts = self._prescribed_displacements()
+        with logged("pfaultDisplacementLoad"):
+            self.lifts = self._prescribed_displacements()
         self.K.zeroRowsColumns(self.bc_rows, diag=1.0)
         self.assembly_wall = time.perf_counter() - t0
         self.log_assembly.end()
@@ -83,12 +85,13 @@ class Problem:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
         # boundary loads per surface, scaled by the surface's history at each time
         self.surface_loads = []
-        for i, b in enumerate(boundaries):
-            if b.kind in ("traction", "displacement") and any(b.traction):
-                loc = np.zeros(dofmap.n_local)
-                tr = [bb.traction if j == i else (0.0, 0.0, 0.0) for j, bb in enumerate(boundaries)]
-                assembler.traction_load(tr, loc)
-                self.surface_loads.append((b, loc))
+        with logged("pfaultTractionLoad"):
+            for i, b in enumerate(boundaries):
+                if b.kind in ("traction", "displacement") and any(b.traction):
+                    loc = np.zeros(dofmap.n_local)
+                    tr = [bb.traction if j == i else (0.0, 0.0, 0.0) for j, bb in enumerate(boundaries)]
+                    assembler.traction_load(tr, loc)
+                    self.surface_loads.append((b, loc))
 
     def _build_operator(self):
         K = self.dm.createMatrix()
@@ -172,7 +175,8 @@ class Problem:
         for b, fl in self.surface_loads:
             loc += b.scale(t) * fl
         if self.drawdown.active:
-            self.asm.pore_pressure_load(self.cell_dp(t), loc)
+            with logged("pfaultPorePressureLoad"):
+                self.asm.pore_pressure_load(self.cell_dp(t), loc)
         self._to_global(loc, out=self.f)
         for b, g, lift in self.lifts:
             self.f.axpy(b.scale(t), lift)

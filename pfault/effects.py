@@ -1,0 +1,130 @@
+"""The effects a scene asks for, decided once from what it sets, and what each of them cost.
+
+A scene builds only what it names: faults (each Lagrange or penalty) bring the multiplier field and the contact
+code; `-pfault_flow` the flow system and its KSP; per-material pressure tables the pore-pressure load; a
+geostatic start the gravity solve and the initial stress; boundary tractions and prescribed displacements their
+loads. Every effect's work runs inside PETSc log events named here, so its cost (set-up and per step) is read
+from PETSc's log, not from timers of our own.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+from petsc4py import PETSc
+
+# effect -> the PETSc log events its work runs in
+EVENTS = {
+    "faults": ("pfaultFaultSetup", "pfaultFaultResidual", "pfaultFaultJacobian"),
+    "flow": ("pfaultFlowAssemble", "pfaultFlowSolve", "pfaultPorePressureLoad"),
+    "pressure_tables": ("pfaultPorePressureLoad",),
+    "geostatic": ("pfaultGeostatic",),
+    "tractions": ("pfaultTractionLoad",),
+    "displacements": ("pfaultDisplacementLoad",),
+}
+
+
+def event(name):
+    return PETSc.Log.Event(name)
+
+
+@contextmanager
+def logged(name):
+    """Run the block inside the PETSc log event ``name``."""
+    ev = event(name)
+    ev.begin()
+    try:
+        yield
+    finally:
+        ev.end()
+
+
+@dataclass(frozen=True)
+class Effects:
+    faults: tuple          # ((name, method), ...)
+    flow: bool
+    pressure_tables: tuple  # materials with a head or pressure table
+    geostatic: bool
+    tractions: tuple       # surfaces with a non-zero traction
+    displacements: tuple   # surfaces with prescribed displacements
+
+    def on(self, name):
+        return bool(getattr(self, name))
+
+    def detail(self, name):
+        v = getattr(self, name)
+        if name == "faults":
+            return ", ".join(f"{n} ({m})" for n, m in v)
+        if name == "geostatic":
+            return "gravity solve, K0 initial stress" if v else ""
+        if name == "flow":
+            return "transient groundwater flow" if v else ""
+        return ", ".join(v)
+
+    def line(self):
+        """One line naming every effect and whether the scene asks for it."""
+        label = {"faults": "faults", "flow": "groundwater flow", "pressure_tables": "pore-pressure tables",
+                 "geostatic": "geostatic start", "tractions": "boundary tractions",
+                 "displacements": "prescribed displacements"}
+        parts = [f"{label[k]} {self.detail(k) if self.on(k) else 'off'}" for k in EVENTS]
+        return "effects: " + "; ".join(parts)
+
+
+def decide(settings, materials, drawdown, flow, faults, boundaries):
+    """Effects of a scene from its settings: the material names, the drawdown tables, whether the flow model is
+    on, the fault settings and the boundary conditions."""
+    tables = tuple(m.name for m, tab in zip(materials, getattr(drawdown, "tables", ())) if tab is not None)
+    return Effects(faults=tuple((f.name, f.method) for f in faults), flow=bool(flow), pressure_tables=tables,
+                   geostatic=bool(settings.geostatic),
+                   tractions=tuple(b.name for b in boundaries
+                                   if b.kind in ("traction", "displacement") and any(b.traction)),
+                   displacements=tuple(b.name for b in boundaries
+                                       if b.kind == "displacement" and any(b.displacement)))
+
+
+def event_total(name, key="time"):
+    """An event's ``key`` ("time" in seconds, "count") so far on this rank, summed over every log stage
+    (0 unless PETSc's logging is on)."""
+    ev, total, stage = event(name), 0.0, 0
+    while True:
+        try:
+            total += ev.getPerfInfo(stage)[key]
+        except PETSc.Error:
+            return total
+        stage += 1
+
+
+def event_times(names):
+    """Seconds spent so far in the given events on this rank."""
+    return sum(event_total(n) for n in names)
+
+
+class EffectCosts:
+    """Set-up and per-step time of each effect, from PETSc's log (max over ranks)."""
+
+    def __init__(self, comm):
+        self.comm = comm
+        PETSc.Log.begin()
+        for names in EVENTS.values():
+            for n in names:
+                event(n)
+        self.at_setup = None
+
+    def mark_setup(self):
+        self.at_setup = {k: event_times(v) for k, v in EVENTS.items()}
+
+    def record(self, effects, n_steps):
+        from mpi4py import MPI
+        mpi = self.comm.tompi4py()
+        out = {}
+        for k, names in EVENTS.items():
+            if not effects.on(k):       # (the pore-pressure load is the flow's or the tables')
+                out[k] = {"on": False, "detail": "", "setup_s": 0.0, "per_step_s": 0.0}
+                continue
+            total = event_times(names)
+            setup = (self.at_setup or {}).get(k, total)
+            setup, total = mpi.allreduce(setup, op=MPI.MAX), mpi.allreduce(total, op=MPI.MAX)
+            out[k] = {"on": effects.on(k), "detail": effects.detail(k), "setup_s": setup,
+                      "per_step_s": (total - setup) / max(n_steps, 1)}
+        return out
