@@ -115,11 +115,12 @@ def lagrange_rows(law, g, g_prev, t, state=None):
     return st, r * A[:, None], dg * A[:, None, None], dt * A[:, None, None]
 
 
-def penalty_traction(law, g, g_prev, t_prev, t0_n=None):
+def penalty_traction(law, g, g_prev, t_prev, t0_n=None, branch=None):
     """Penalty contact: traction (nf,3), derivative dt/dg (nf,3,3) and state.
 
     t_N = t0_N + c_N g_N while in contact (t_N <= 0), 0 when open; tangential return map from
-    t_T^n + c_T dg_T. t0_N is the initial (effective) normal traction, 0 by default.
+    t_T^n + c_T dg_T. t0_N is the initial (effective) normal traction, 0 by default. ``branch``: the branches to
+    take instead of the return map's (stick or open only: the linear elastic trial of a step).
     """
     nf = len(g)
     kn, kt = law.c_n, law.c_t
@@ -128,14 +129,14 @@ def penalty_traction(law, g, g_prev, t_prev, t0_n=None):
     state = np.full(nf, OPEN)
     t0n = np.zeros(nf) if t0_n is None else t0_n
     tn_trial = t0n + kn * g[:, 0]
-    closed = tn_trial <= 0
+    closed = tn_trial <= 0 if branch is None else np.asarray(branch) != OPEN
     t[closed, 0] = tn_trial[closed]
     d[closed, 0, 0] = kn[closed]
     trial = t_prev[:, 1:] + kt[:, None] * (g[:, 1:] - g_prev[:, 1:])
     tau = coulomb_limit(t[:, 0], law.cohesion, law.tan_phi)
     dtau_dtn = np.where(law.cohesion - law.tan_phi * t[:, 0] > 0, -law.tan_phi, 0.0)
     tn = np.linalg.norm(trial, axis=1)
-    stick = closed & (tn <= tau)
+    stick = closed & (tn <= tau) if branch is None else closed
     slip = closed & ~stick
     t[stick, 1:] = trial[stick]
     d[stick, 1, 1] = d[stick, 2, 2] = kt[stick]

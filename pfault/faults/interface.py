@@ -178,8 +178,9 @@ class FaultInterface:
         te[:, 0] += self.pn
         return te
 
-    def _penalty(self, gl):
-        """Penalty faces' total traction, its derivative and state (zero rows for Lagrange faces)."""
+    def _penalty(self, gl, state=None):
+        """Penalty faces' total traction, its derivative and state (zero rows for Lagrange faces). ``state``:
+        the branches to take instead of the return map's (stick or open)."""
         pen = ~self.lagrange
         t = np.zeros((self.nf, 3))
         d = np.zeros((self.nf, 3, 3))
@@ -188,15 +189,17 @@ class FaultInterface:
             # the penalty law acts on the effective traction; the faces receive the total one
             t[pen], d[pen], st[pen] = ct.penalty_traction(self.penalty_law[pen], gl[pen], self.start.g[pen],
                                                           self.effective(self.start.t)[pen],
-                                                          self.t0[pen, 0] + self.pn[pen])
+                                                          self.t0[pen, 0] + self.pn[pen],
+                                                          None if state is None else state[pen])
             t[pen, 0] -= self.pn[pen]
         return t, d, st
 
-    def tractions(self, x_loc, gl=None):
-        """Total traction of every owned face (local frame): the multiplier, or the penalty law's."""
+    def tractions(self, x_loc, gl=None, state=None):
+        """Total traction of every owned face (local frame): the multiplier, or the penalty law's (in the
+        branches ``state`` if given)."""
         if gl is None:
             gl = self.jumps(x_loc)[1]
-        t, _, _ = self._penalty(gl)
+        t, _, _ = self._penalty(gl, state)
         lag = self.lagrange
         if self.has_lagrange:
             t[lag] = x_loc[self.lm_dofs[lag]]
@@ -272,19 +275,19 @@ class FaultInterface:
 
     def residual(self, x_loc, out, state=None):
         """Add the interface terms to the local residual array ``out``; returns the owned faces' states.
-        ``state``: Lagrange faces' branches to take instead of the iterate's (stick or open)."""
+        ``state``: the faces' branches to take instead of the iterate's (stick or open)."""
         with logged("pfaultFaultResidual"):
             return self._residual(x_loc, out, state)
 
     def _residual(self, x_loc, out, state):
         gl = self.jumps(x_loc)[1]
-        t = self.tractions(x_loc, gl)
+        t = self.tractions(x_loc, gl, state)
         # forces on the displacement dofs from the traction change (the initial traction is in equilibrium
         # with the initial stress): minus side -(A/3) R^T dt, plus side +(A/3) R^T dt
         force = np.einsum("nji,nj->ni", self.R, t - self.t0) * (self.area / 3.0)[:, None]
         fu = self.sign[None, :] * np.tile(force, (1, 6)) * self.u_mask
         out += np.bincount(self.u_dofs.ravel(), weights=fu.ravel(), minlength=len(out))
-        out_state = self._penalty(gl)[2]
+        out_state = self._penalty(gl, state)[2]
         if self.has_lagrange:
             idx, st, r, _, _, _ = self._lagrange_terms(x_loc, state)
             out_state[idx] = st
@@ -292,7 +295,7 @@ class FaultInterface:
         return out_state
 
     def add_jacobian(self, x_loc, J, state=None, glued=False):
-        """Add the interface blocks to J (global indices); returns the owned faces' states. ``state``: Lagrange
+        """Add the interface blocks to J (global indices); returns the owned faces' states. ``state``: the
         faces' branches to take instead of the iterate's (stick or open); ``glued``: every face stuck whatever
         x_loc (the penalty and Lagrange laws' stick branches)."""
         with logged("pfaultFaultJacobian"):
@@ -300,7 +303,7 @@ class FaultInterface:
 
     def _add_jacobian(self, x_loc, J, state, glued):
         gl = self.jumps(x_loc)[1]
-        _, d, out_state = self._penalty(gl)
+        _, d, out_state = self._penalty(gl, state)
         if glued:
             law = self.penalty_law
             d = np.stack([law.c_n, law.c_t, law.c_t], axis=1)[:, :, None] * np.eye(3)[None]
