@@ -280,14 +280,19 @@ class Simulation:
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Output")
         stage.push()
-        if self.comm.rank == 0:
+
+        def open_writer():
             from .io.output import RunWriter
             points, tets = self._output_mesh()
-            self.writer = RunWriter(self.settings.output_dir, points, tets, self.serial.cell_material,
-                                    self.material_names,
-                                    fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
-                                                                                self.split.fault_id))
-            self.writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            writer = RunWriter(self.settings.output_dir, points, tets, self.serial.cell_material,
+                               self.material_names,
+                               fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
+                                                                           self.split.fault_id))
+            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            return writer
+        writer = run_on_root(self.comm, open_writer)   # a failure to write ends every rank
+        if self.comm.rank == 0:
+            self.writer = writer
         self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
         stage.pop()
         self.wall["output"] += time.perf_counter() - t0
