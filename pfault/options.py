@@ -18,7 +18,7 @@ from .units import parse_list, parse_quantity, parse_table
 @dataclass(frozen=True)
 class Spec:
     name: str            # without the leading '-', may contain <material>, <surface>, <fault>
-    kind: str            # string | choice | real | int | bool | quantity | list | table | names
+    kind: str            # string | choice | real | int | ints | bool | quantity | list | table | names
     default: object
     unit: str
     help: str
@@ -43,7 +43,7 @@ SPECS = [
        choices=("box", "wuxi", "queretaro")),
     _s("pfault_box_size", "list", "1000,1000,100", "m", "box lengths Lx,Ly,Lz; the box spans "
        "[0,Lx]x[0,Ly]x[-Lz,0], land surface at z = 0"),
-    _s("pfault_box_cells", "list", "10,10,10", "", "hexahedra per direction nx,ny,nz (6 tetrahedra each)"),
+    _s("pfault_box_cells", "ints", "10,10,10", "", "hexahedra per direction nx,ny,nz (6 tetrahedra each)"),
     _s("pfault_box_materials", "names", "soil", "", "material names from the top layer down"),
     _s("pfault_box_interfaces", "list", "", "m", "depths below the surface of the interfaces between the "
        "layers of -pfault_box_materials (one fewer than materials)"),
@@ -279,16 +279,15 @@ class OptionReader:
                 return False
             raise InputError(f"-{name}: '{text}' is not true or false")
         if kind == "int":
-            try:
-                return int(str(text))
-            except ValueError:
-                raise InputError(f"-{name}: '{text}' is not a whole number") from None
+            return _whole_number(text, name)
+        if kind == "ints":
+            return [_whole_number(t, name) for t in str(text).split(",") if t.strip()]
         if kind in ("real", "quantity"):
-            return parse_quantity(text, name)
+            return parse_quantity(text, name, spec.unit)
         if kind == "list":
-            return parse_list(text, name) if str(text).strip() else []
+            return parse_list(text, name, spec.unit) if str(text).strip() else []
         if kind == "table":
-            return parse_table(text, name)
+            return parse_table(text, name, spec.unit)
         if kind == "names":
             return [s.strip() for s in str(text).split(",") if s.strip()]
         raise RuntimeError(kind)
@@ -302,6 +301,13 @@ class OptionReader:
         unknown = self.unknown_pfault_options()
         if unknown:
             raise InputError(_unknown_message(unknown[0], self.queried | {s.name for s in SPECS}))
+
+
+def _whole_number(text, name):
+    try:
+        return int(str(text))
+    except ValueError:
+        raise InputError(f"-{name}: '{text}' is not a whole number") from None
 
 
 def _unknown_message(name, candidates):
