@@ -161,9 +161,8 @@ SPECS = [
        "Jacobian changed"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
-    _s("pfault_geostatic_k0", "quantity", -1.0, "", "ratio of horizontal to vertical effective stress "
-       "(K0 procedure, hydrostatic pore pressure below -pfault_water_table); default: the stress of the elastic "
-       "gravity solution itself (self-equilibrated; horizontal/vertical = nu/(1-nu) in flat layers)"),
+    _s("pfault_geostatic_k0", "quantity", None, "", "ratio K0 >= 0 of horizontal to vertical effective stress "
+       "(hydrostatic pore pressure below -pfault_water_table); unset: nu/(1-nu) of each material"),
     _s("pfault_gravity", "quantity", 9.80665, "m/s**2", "gravitational acceleration"),
     _s("pfault_water_density", "quantity", 1000.0, "kg/m**3", "density of water (head to pressure)"),
     _s("pfault_water_table", "quantity", 0.0, "m", "elevation of the initial water table (hydrostatic "

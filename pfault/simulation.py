@@ -55,6 +55,7 @@ class Simulation:
         serial = run_on_root(comm, build_serial)
         names = comm.tompi4py().bcast((serial.material_names, sorted(serial.surfaces)) if comm.rank == 0 else None)
         self.material_names, self.surface_names = names
+        scn.check_ground_surface(reader, s, self.surface_names)
         self.materials = scn.read_materials(reader, self.material_names)
         self.drawdown = scn.read_drawdown(reader, self.material_names, s.water_density, s.gravity)
         self.flow_settings = None
