@@ -90,8 +90,9 @@ def read_settings(reader, options_file=""):
     return s
 
 
-def generator_options(reader, settings):
-    """Read the options of the built-in generator; returns a callable building the SerialMesh on rank 0."""
+def generator_options(reader, settings, index_bytes=4):
+    """Read the options of the built-in generator; returns a callable building the SerialMesh on rank 0.
+    ``index_bytes``: size of PETSc's indices, which bounds the number of unknowns of a box."""
     if settings.mesh_file:
         path = settings.mesh_file
         from .mesh.gmsh_io import read_msh
@@ -103,9 +104,20 @@ def generator_options(reader, settings):
         interfaces = reader.get("pfault_box_interfaces")
         if len(size) != 3 or len(cells) != 3:
             raise InputError("-pfault_box_size and -pfault_box_cells take three values each (x,y,z)")
+        if min(size) <= 0:
+            raise InputError(f"-pfault_box_size: lengths must be positive, got {','.join(f'{v:g}' for v in size)}")
+        if min(cells) < 1:
+            raise InputError(f"-pfault_box_cells: need at least one cell per direction, got "
+                             f"{','.join(str(c) for c in cells)}")
+        from .checks import check_box_indices, check_box_memory
+        check_box_indices(cells, index_bytes)
         from .mesh.box import box_mesh, parse_planes
         planes = parse_planes(reader.get("pfault_box_fault_planes"))
-        return lambda: box_mesh(size, [int(c) for c in cells], mats, interfaces, planes=planes)
+
+        def build_box():
+            check_box_memory(cells)
+            return box_mesh(size, cells, mats, interfaces, planes=planes)
+        return build_box
     if settings.mesh_generator == "wuxi":
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_wuxi_{key}") for key in

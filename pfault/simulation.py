@@ -8,7 +8,7 @@ import time
 import numpy as np
 from petsc4py import PETSc
 
-from . import fields, scene as scn
+from . import checks, fields, scene as scn
 from .assembly.elastic import ElasticAssembler
 from .errors import InputError, run_on_root
 from .mesh import distributed
@@ -49,9 +49,10 @@ class Simulation:
         stage = PETSc.Log.Stage("Mesh")
         stage.push()
         self.settings = s = scn.read_settings(reader, self.options_file)
+        run_on_root(comm, checks.probe_output_dir, s.output_dir)
         from .solver.setup import apply_solver_file
         self.solver_file = apply_solver_file(reader.get("pfault_solver"), self.options_file)
-        build_serial = scn.generator_options(reader, s)
+        build_serial = scn.generator_options(reader, s, index_bytes=np.dtype(PETSc.IntType).itemsize)
         serial = run_on_root(comm, build_serial)
         names = comm.tompi4py().bcast((serial.material_names, sorted(serial.surfaces)) if comm.rank == 0 else None)
         self.material_names, self.surface_names = names
@@ -75,6 +76,7 @@ class Simulation:
 
         def arrays():
             out = scn.boundary_arrays(serial, self.boundaries, s.ground_surface)
+            checks.check_held(serial.points, out[0], [b.name for b in self.boundaries])
             if self.flow_settings is not None:
                 from .solver.flow import FIXED_HEAD_BIT, fixed_head_vertices
                 out[0][:] |= FIXED_HEAD_BIT * fixed_head_vertices(serial, self.flow_settings.fixed_head_surfaces)
@@ -84,6 +86,10 @@ class Simulation:
                 from .solver.fault import stabilization_pairs
                 split = split_faults(serial, fault_names)
                 pairs = stabilization_pairs(serial, split, self.materials)
+            written = 1 + s.time_steps // s.output_every + (s.time_steps % s.output_every > 0)
+            checks.check_output_space(s.output_dir, checks.output_bytes(
+                len(serial.points) + (len(split.split_vertices) if split else 0), len(serial.tets),
+                len(split.faces) if split else 0, written, flow=self.flow_settings is not None))
             return out, split, pairs
         arr = run_on_root(comm, arrays)
         (mask, face_tag, ground), split, pairs = arr if arr is not None else ((None, None, None), None, None)
