@@ -11,7 +11,7 @@ import ctypes
 import difflib
 from dataclasses import dataclass, field
 
-from .errors import InputError
+from .errors import InputError, collective_check
 from .units import parse_list, parse_quantity, parse_table
 
 
@@ -353,10 +353,12 @@ def unused_petsc_options(PETSc):
 
 
 def check_unused_petsc_options(PETSc, reader):
+    """InputError on every rank if any rank has an option that no PETSc object read: what each rank has
+    read can differ (objects made on some ranks only, such as per-rank sub-solvers), and an error raised
+    on one rank only would leave the others waiting."""
     left = unused_petsc_options(PETSc)
+    message = None
     if left:
-        candidates = set()
-        for k in reader.db.getAll():
-            candidates.add(k)
-        raise InputError(f"unused option -{left[0]}: no PETSc object in this run reads it (misspelled, or it "
-                         f"does not apply to the chosen solver); remove it or fix its name")
+        message = (f"unused option -{left[0]}: no PETSc object in this run reads it (misspelled, or it does not "
+                   "apply to the chosen solver); remove it or fix its name")
+    collective_check(PETSc.COMM_WORLD, message)
