@@ -292,3 +292,19 @@ def test_command_line_override_and_duplicates(tmp_path):
     assert code == 0
     assert [line for line in stderr.splitlines() if "warning" in line] == [
         "pfault: warning: -pfault_time_steps is given 2 times on the command line; the value used is '1'"]
+
+
+def test_free_rigid_motions():
+    """The rigid-body check on the corners of a unit cube: which motions the constrained components leave free."""
+    from pfault.checks import free_rigid_motions
+    x = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float) * 100.0 + 5e5
+    mask = np.zeros(8, dtype=np.int64)
+    assert free_rigid_motions(x, mask) == ([0, 1, 2], [0, 1, 2], 6)
+    mask[0] = 7                                   # one point fixed: rotations about it
+    assert free_rigid_motions(x, mask) == ([], [0, 1, 2], 3)
+    mask[4] = 7                                   # a second one on the x axis through it: rotation about x
+    assert free_rigid_motions(x, mask) == ([], [0], 1)
+    mask[2] = 7                                   # a third, off that axis: held
+    assert free_rigid_motions(x, mask) == ([], [], 0)
+    bottom = np.where(x[:, 2] == x[:, 2].min(), 4, 0)    # uz on the plane z = min: x, y and rotation about z
+    assert free_rigid_motions(x, bottom) == ([0, 1], [2], 3)
