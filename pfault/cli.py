@@ -1,39 +1,62 @@
 """Command line: ``mpirun -n 2 python -m pfault SCENE.opts [-option value ...]``.
 
-Exit codes: 0 done, 1 bad input, 2 usage, 3 a step did not converge.
+Exit codes (the same on every rank; mpirun returns them):
+
+    0  done
+    1  bad input: an option, the scene file or a mesh file (one line on stderr naming it and the fix)
+    2  usage: no scene file, a scene file that does not exist, stray arguments
+    3  a step did not converge (summary.json says which), or the groundwater-flow solve failed
+    4  the output cannot be written: -pfault_output_dir not writable, a file in the way, the disk full
+       (checked before the first solve against an estimate of the output size, and on every write)
+    5  out of memory (a box too large for this machine is found before it is built)
+    6  internal error: a bug; the traceback is printed before the line
+
+Every error is one line starting with ``pfault: error:`` (``pfault: internal error:`` for a bug), printed
+once. An error on some ranks only ends the whole job within seconds (pfault.errors.RunGuard).
 """
 
 from __future__ import annotations
 
-import sys
 import time
 
 from petsc4py import PETSc
 
-from .errors import InputError
+from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_MEMORY, EXIT_NOT_CONVERGED, EXIT_OK, EXIT_OUTPUT,  # noqa: F401
+                     EXIT_USAGE, RunGuard, StepNotConverged, run_on_root)
 
-EXIT_OK, EXIT_INPUT, EXIT_USAGE, EXIT_NOT_CONVERGED = 0, 1, 2, 3
+
+def _flow_failure(exc):
+    return StepNotConverged(f"{exc}; the flow solver is set with -flow_ksp_* and -flow_pc_* (e.g. raise "
+                            "-flow_ksp_max_it or choose -flow_pc_type lu)")
+
+
+def _destroy(sim):
+    if sim is not None:
+        sim.destroy()
 
 
 def main(options_file, argv):
-    from .simulation import Simulation
     from .options import help_text
-    if PETSc.Options().hasName("help"):
-        PETSc.Sys.Print(help_text())
+    from .solver.flow import FlowNotConverged
+    from .simulation import Simulation
+    comm = PETSc.COMM_WORLD
+    guard = RunGuard(comm)
+    sim = None
     t0 = time.perf_counter()
-    sim = Simulation(options_file, argv)
     try:
+        if PETSc.Options().hasName("help"):
+            PETSc.Sys.Print(help_text())
+        sim = Simulation(options_file, argv)
         sim.setup()
         summary = sim.run()
-        sim.write_summary(time.perf_counter() - t0)
-    except InputError as exc:
-        PETSc.Sys.syncPrint(f"pfault: error: {exc}", flush=True) if False else None
-        if PETSc.COMM_WORLD.rank == 0:
-            sys.stderr.write(f"pfault: error: {exc}\n")
-            sys.stderr.flush()
-        return EXIT_INPUT
-    finally:
-        sim.destroy()
+        run_on_root(comm, sim.write_summary, time.perf_counter() - t0)
+    except Exception as exc:  # noqa: BLE001  (every failure ends the run through the guard)
+        code = guard.settle(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
+        _destroy(sim)          # reached only when every rank failed together
+        guard.free()
+        return code
+    _destroy(sim)
+    guard.free()
     PETSc.Sys.Print(f"pfault: {summary['scene']}: max subsidence {summary['max_subsidence_m']:.6g} m, "
                     f"max horizontal displacement {summary['max_horizontal_displacement_m']:.6g} m, "
                     f"wall {time.perf_counter() - t0:.2f} s -> {sim.settings.output_dir}")

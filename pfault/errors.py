@@ -1,8 +1,114 @@
-"""Input errors that every rank raises together."""
+"""How a run fails: one line, a documented exit code, and every rank ends.
+
+Exit codes (also in pfault/cli.py and README.md)::
+
+    0 done                      3 a step did not converge    6 internal error (a bug)
+    1 bad input                 4 output cannot be written
+    2 usage                     5 out of memory
+
+Errors that depend only on the options are raised by every rank together. Work done on one rank (the
+serial mesh, output) runs through ``run_on_root``, which shares any exception it raises with every rank.
+What is left, an exception on some ranks only, is settled by ``RunGuard.settle``: if every rank reaches
+it within a few seconds the ranks end together; otherwise the failing rank prints its line and aborts
+the MPI job with the exit code (the others are waiting in a collective call and cannot be reached).
+
+This module does not import PETSc: ``python -m pfault`` uses it before PETSc is initialised.
+"""
+
+from __future__ import annotations
+
+import errno
+import sys
+import time
+import traceback
+
+EXIT_OK = 0
+EXIT_INPUT = 1
+EXIT_USAGE = 2
+EXIT_NOT_CONVERGED = 3
+EXIT_OUTPUT = 4
+EXIT_MEMORY = 5
+EXIT_INTERNAL = 6
+
+PETSC_ERR_MEM = 55           # PETSc's error code for a failed allocation
+SETTLE_SECONDS = 3.0         # how long a failing rank waits for the others before it aborts the job
 
 
-class InputError(Exception):
-    """A problem with user input: an option, a file or a value. One line, naming the fix."""
+class PfaultError(Exception):
+    """An error that ends the run with ``exit_code``; its text is one line naming the option or file and
+    the fix. ``detail`` holds a traceback worth printing (internal errors only)."""
+    exit_code = EXIT_INTERNAL
+    kind = "error"
+
+    def __init__(self, message, detail=None):
+        super().__init__(message)
+        self.detail = detail
+
+    def line(self, rank=None):
+        """The line printed for it; ``rank`` when only that rank failed."""
+        where = "" if rank is None else f" on rank {rank} (the other ranks are stopped)"
+        return f"pfault: {self.kind}{where}: {self}"
+
+
+class InputError(PfaultError):
+    """A problem with user input: an option, a file or a value."""
+    exit_code = EXIT_INPUT
+
+
+class OutputError(PfaultError):
+    """The output directory cannot be created or written, or its disk is full."""
+    exit_code = EXIT_OUTPUT
+
+
+class OutOfMemory(PfaultError):
+    exit_code = EXIT_MEMORY
+
+
+class StepNotConverged(PfaultError):
+    """A solve failed in a way that ends the run (the groundwater-flow KSP): exit code 3."""
+    exit_code = EXIT_NOT_CONVERGED
+
+
+class InternalError(PfaultError):
+    exit_code = EXIT_INTERNAL
+    kind = "internal error"
+
+
+_KINDS = {cls.__name__: cls for cls in (PfaultError, InputError, OutputError, OutOfMemory, StepNotConverged,
+                                        InternalError)}
+
+
+def as_pfault_error(exc):
+    """The PfaultError an exception ends the run with (out of memory, a full disk and bugs included)."""
+    if isinstance(exc, PfaultError):
+        return exc
+    if isinstance(exc, MemoryError):
+        return OutOfMemory(f"out of memory ({exc or 'an allocation failed'}); use a smaller mesh "
+                           "(-pfault_box_cells, -pfault_mesh_size_factor) or more nodes")
+    if type(exc).__module__.startswith("petsc4py") and getattr(exc, "ierr", None) == PETSC_ERR_MEM:
+        return OutOfMemory("out of memory (PETSc could not allocate); use a smaller mesh (-pfault_box_cells, "
+                           "-pfault_mesh_size_factor), another solver (-pfault_solver gamg) or more nodes")
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        where = f" {exc.filename}" if exc.filename else ""
+        return OutputError(f"cannot write{where}: {exc.strerror or exc}; free space on that disk or choose "
+                           "another -pfault_output_dir")
+    detail = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    text = " ".join(str(exc).split()) or "(no message)"
+    return InternalError(f"{type(exc).__name__}: {text} (a bug: please report it with the command line and "
+                         "the traceback above)", detail=detail)
+
+
+def _mpi(comm):
+    return comm.tompi4py() if hasattr(comm, "tompi4py") else comm
+
+
+def _pack(err):
+    return type(err).__name__, str(err), err.detail
+
+
+def _unpack(packed):
+    kind, message, detail = packed
+    return _KINDS[kind](message, detail=detail)
 
 
 def collective_check(comm, message):
@@ -11,28 +117,78 @@ def collective_check(comm, message):
     ``message`` is this rank's verdict: None when fine, otherwise a one-line text. The first
     non-empty message (lowest rank) is raised everywhere, so no rank is left waiting.
     """
-    from mpi4py import MPI  # noqa: F401  (mpi4py is the communicator layer of petsc4py)
-
-    mpicomm = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
-    messages = mpicomm.allgather(message)
+    messages = _mpi(comm).allgather(message)
     for m in messages:
         if m:
             raise InputError(m)
 
 
 def run_on_root(comm, func, *args, **kwargs):
-    """Run ``func`` on rank 0 only and share its InputError verdict with every rank.
+    """Run ``func`` on rank 0 only and share the exception it raises, if any, with every rank.
 
-    Returns func's result on rank 0 and None elsewhere; an InputError on rank 0 is raised on all ranks.
+    Returns func's result on rank 0 and None elsewhere. Any exception on rank 0 (an InputError, a full
+    disk, a failed allocation, a bug) is raised on all ranks as the same PfaultError.
     """
-    mpicomm = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
-    result, message = None, None
+    mpicomm = _mpi(comm)
+    result, packed = None, None
     if mpicomm.rank == 0:
         try:
             result = func(*args, **kwargs)
-        except InputError as exc:
-            message = str(exc)
-    message = mpicomm.bcast(message, root=0)
-    if message:
-        raise InputError(message)
+        except Exception as exc:  # noqa: BLE001  (every exception is shared, then raised again)
+            packed = _pack(as_pfault_error(exc))
+    if mpicomm.size > 1:
+        packed = mpicomm.bcast(packed, root=0)
+    if packed is not None:
+        raise _unpack(packed)
     return result
+
+
+def write_line(text):
+    sys.stderr.write(text + "\n")
+    sys.stderr.flush()
+
+
+class RunGuard:
+    """Ends a failed run on every rank. Created by every rank at the start of a run (it duplicates the
+    communicator, so its barrier cannot be confused with a collective call the others are waiting in)."""
+
+    def __init__(self, comm):
+        self.comm = _mpi(comm).Dup()
+
+    def settle(self, exc, wait=SETTLE_SECONDS):
+        """Called by a rank with an exception. Returns the exit code when every rank failed together (rank
+        0 prints the line); otherwise prints this rank's line and aborts the MPI job with the code."""
+        err = as_pfault_error(exc)
+        comm = self.comm
+        if comm.size == 1:
+            self._print([_pack(err)])
+            return err.exit_code
+        request = comm.Ibarrier()
+        deadline = time.monotonic() + wait
+        while not request.Test():
+            if time.monotonic() > deadline:
+                self._print([_pack(err)], rank=comm.rank)
+                from mpi4py import MPI
+                MPI.COMM_WORLD.Abort(err.exit_code)
+            time.sleep(0.01)
+        errors = comm.gather(_pack(err), root=0)
+        if comm.rank == 0:
+            self._print(errors)
+        return comm.bcast(_unpack(errors[0]).exit_code if comm.rank == 0 else None, root=0)
+
+    @staticmethod
+    def _print(packed_errors, rank=None):
+        """One line per distinct error (ranks that failed together usually share one), with the
+        traceback of an internal error before it."""
+        seen = set()
+        for packed in packed_errors:
+            err = _unpack(packed)
+            if err.line() in seen:
+                continue
+            seen.add(err.line())
+            if err.detail:
+                sys.stderr.write(err.detail)
+            write_line(err.line(rank))
+
+    def free(self):
+        self.comm.Free()

@@ -11,14 +11,14 @@ import ctypes
 import difflib
 from dataclasses import dataclass, field
 
-from .errors import InputError
+from .errors import InputError, collective_check
 from .units import parse_list, parse_quantity, parse_table
 
 
 @dataclass(frozen=True)
 class Spec:
     name: str            # without the leading '-', may contain <material>, <surface>, <fault>
-    kind: str            # string | choice | real | int | bool | quantity | list | table | names
+    kind: str            # string | choice | real | int | ints | bool | quantity | list | table | names
     default: object
     unit: str
     help: str
@@ -43,7 +43,7 @@ SPECS = [
        choices=("box", "wuxi", "queretaro")),
     _s("pfault_box_size", "list", "1000,1000,100", "m", "box lengths Lx,Ly,Lz; the box spans "
        "[0,Lx]x[0,Ly]x[-Lz,0], land surface at z = 0"),
-    _s("pfault_box_cells", "list", "10,10,10", "", "hexahedra per direction nx,ny,nz (6 tetrahedra each)"),
+    _s("pfault_box_cells", "ints", "10,10,10", "", "hexahedra per direction nx,ny,nz (6 tetrahedra each)"),
     _s("pfault_box_materials", "names", "soil", "", "material names from the top layer down"),
     _s("pfault_box_interfaces", "list", "", "m", "depths below the surface of the interfaces between the "
        "layers of -pfault_box_materials (one fewer than materials)"),
@@ -122,9 +122,8 @@ SPECS = [
        "fieldsplit) or a path; its options apply where not set by the scene or the command line"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
-    _s("pfault_geostatic_k0", "quantity", -1.0, "", "ratio of horizontal to vertical effective stress "
-       "(K0 procedure, hydrostatic pore pressure below -pfault_water_table); default: the stress of the elastic "
-       "gravity solution itself (self-equilibrated; horizontal/vertical = nu/(1-nu) in flat layers)"),
+    _s("pfault_geostatic_k0", "quantity", None, "", "ratio K0 >= 0 of horizontal to vertical effective stress "
+       "(hydrostatic pore pressure below -pfault_water_table); unset: nu/(1-nu) of each material"),
     _s("pfault_gravity", "quantity", 9.80665, "m/s**2", "gravitational acceleration"),
     _s("pfault_water_density", "quantity", 1000.0, "kg/m**3", "density of water (head to pressure)"),
     _s("pfault_water_table", "quantity", 0.0, "m", "elevation of the initial water table (hydrostatic "
@@ -230,16 +229,15 @@ class OptionReader:
                 return False
             raise InputError(f"-{name}: '{text}' is not true or false")
         if kind == "int":
-            try:
-                return int(str(text))
-            except ValueError:
-                raise InputError(f"-{name}: '{text}' is not a whole number") from None
+            return _whole_number(text, name)
+        if kind == "ints":
+            return [_whole_number(t, name) for t in str(text).split(",") if t.strip()]
         if kind in ("real", "quantity"):
-            return parse_quantity(text, name)
+            return parse_quantity(text, name, spec.unit)
         if kind == "list":
-            return parse_list(text, name) if str(text).strip() else []
+            return parse_list(text, name, spec.unit) if str(text).strip() else []
         if kind == "table":
-            return parse_table(text, name)
+            return parse_table(text, name, spec.unit)
         if kind == "names":
             return [s.strip() for s in str(text).split(",") if s.strip()]
         raise RuntimeError(kind)
@@ -253,6 +251,13 @@ class OptionReader:
         unknown = self.unknown_pfault_options()
         if unknown:
             raise InputError(_unknown_message(unknown[0], self.queried | {s.name for s in SPECS}))
+
+
+def _whole_number(text, name):
+    try:
+        return int(str(text))
+    except ValueError:
+        raise InputError(f"-{name}: '{text}' is not a whole number") from None
 
 
 def _unknown_message(name, candidates):
@@ -299,10 +304,12 @@ def unused_petsc_options(PETSc):
 
 
 def check_unused_petsc_options(PETSc, reader):
+    """InputError on every rank if any rank has an option that no PETSc object read: what each rank has
+    read can differ (objects made on some ranks only, such as per-rank sub-solvers), and an error raised
+    on one rank only would leave the others waiting."""
     left = unused_petsc_options(PETSc)
+    message = None
     if left:
-        candidates = set()
-        for k in reader.db.getAll():
-            candidates.add(k)
-        raise InputError(f"unused option -{left[0]}: no PETSc object in this run reads it (misspelled, or it "
-                         f"does not apply to the chosen solver); remove it or fix its name")
+        message = (f"unused option -{left[0]}: no PETSc object in this run reads it (misspelled, or it does not "
+                   "apply to the chosen solver); remove it or fix its name")
+    collective_check(PETSc.COMM_WORLD, message)

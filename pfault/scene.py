@@ -48,11 +48,15 @@ class Settings:
     time_end: float
     time_steps: int
     geostatic: bool
-    k0: float
+    k0: float            # K0_UNSET: nu/(1-nu) of each material
     gravity: float
     water_density: float
     water_table: float
     max_cuts: int = 3
+
+
+# the solver reads a negative K0 as "not given"; users cannot give one (read_settings rejects it)
+K0_UNSET = -1.0
 
 
 def read_settings(reader, options_file=""):
@@ -61,11 +65,20 @@ def read_settings(reader, options_file=""):
     out = reader.get("pfault_output_dir")
     if out == "runs/<scene>":
         out = os.path.join("runs", scene)
-    s = Settings(scene=scene, output_dir=out, output_every=max(1, reader.get("pfault_output_every")),
+    if not out.strip():
+        raise InputError("-pfault_output_dir: empty directory name; give a directory such as runs/<scene>")
+    every = reader.get("pfault_output_every")
+    if every < 1:
+        raise InputError(f"-pfault_output_every: must be at least 1 (fields every N steps), got {every}")
+    k0 = reader.get("pfault_geostatic_k0")
+    if k0 is not None and k0 < 0:
+        raise InputError(f"-pfault_geostatic_k0: must not be negative, got {k0:g} (leave it unset for "
+                         "nu/(1-nu))")
+    s = Settings(scene=scene, output_dir=out, output_every=every,
                  ground_surface=reader.get("pfault_ground_surface"), mesh_file=reader.get("pfault_mesh_file"),
                  mesh_generator=reader.get("pfault_mesh_generator"), time_end=reader.get("pfault_time_end"),
                  time_steps=reader.get("pfault_time_steps"), geostatic=reader.get("pfault_geostatic"),
-                 k0=reader.get("pfault_geostatic_k0"), gravity=reader.get("pfault_gravity"),
+                 k0=K0_UNSET if k0 is None else k0, gravity=reader.get("pfault_gravity"),
                  water_density=reader.get("pfault_water_density"), water_table=reader.get("pfault_water_table"),
                  max_cuts=reader.get("pfault_time_max_cuts"))
     if s.max_cuts < 0 or s.max_cuts > 10:
@@ -77,8 +90,9 @@ def read_settings(reader, options_file=""):
     return s
 
 
-def generator_options(reader, settings):
-    """Read the options of the built-in generator; returns a callable building the SerialMesh on rank 0."""
+def generator_options(reader, settings, index_bytes=4):
+    """Read the options of the built-in generator; returns a callable building the SerialMesh on rank 0.
+    ``index_bytes``: size of PETSc's indices, which bounds the number of unknowns of a box."""
     if settings.mesh_file:
         path = settings.mesh_file
         from .mesh.gmsh_io import read_msh
@@ -90,9 +104,20 @@ def generator_options(reader, settings):
         interfaces = reader.get("pfault_box_interfaces")
         if len(size) != 3 or len(cells) != 3:
             raise InputError("-pfault_box_size and -pfault_box_cells take three values each (x,y,z)")
+        if min(size) <= 0:
+            raise InputError(f"-pfault_box_size: lengths must be positive, got {','.join(f'{v:g}' for v in size)}")
+        if min(cells) < 1:
+            raise InputError(f"-pfault_box_cells: need at least one cell per direction, got "
+                             f"{','.join(str(c) for c in cells)}")
+        from .checks import check_box_indices, check_box_memory
+        check_box_indices(cells, index_bytes)
         from .mesh.box import box_mesh, parse_planes
         planes = parse_planes(reader.get("pfault_box_fault_planes"))
-        return lambda: box_mesh(size, [int(c) for c in cells], mats, interfaces, planes=planes)
+
+        def build_box():
+            check_box_memory(cells)
+            return box_mesh(size, cells, mats, interfaces, planes=planes)
+        return build_box
     if settings.mesh_generator == "wuxi":
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_wuxi_{key}") for key in
@@ -109,6 +134,16 @@ def generator_options(reader, settings):
         return lambda: queretaro_mesh(factor, **params)
     raise InputError(f"-pfault_mesh_generator {settings.mesh_generator}: this generator is not available yet; "
                      "use box, wuxi or queretaro, or give -pfault_mesh_file")
+
+
+def check_ground_surface(reader, settings, surface_names):
+    """The land surface is a surface of the mesh; only the default 'top' may be missing (then subsidence
+    is measured over all vertices)."""
+    name = settings.ground_surface
+    if name in surface_names or (name == "top" and not reader.has("pfault_ground_surface")):
+        return
+    raise InputError(f"-pfault_ground_surface {name}: no such physical surface in the mesh; give one of "
+                     f"{', '.join(surface_names) or '(none: the mesh has no physical surfaces)'}")
 
 
 def read_materials(reader, names):

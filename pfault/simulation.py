@@ -8,7 +8,7 @@ import time
 import numpy as np
 from petsc4py import PETSc
 
-from . import fields, scene as scn
+from . import checks, fields, scene as scn
 from .assembly.elastic import ElasticAssembler
 from .effects import EffectCosts, logged
 from .effects import decide as decide_effects
@@ -52,12 +52,14 @@ class Simulation:
         stage = PETSc.Log.Stage("Mesh")
         stage.push()
         self.settings = s = scn.read_settings(reader, self.options_file)
+        run_on_root(comm, checks.probe_output_dir, s.output_dir)
         from .solver.setup import apply_solver_file
         self.solver_file = apply_solver_file(reader.get("pfault_solver"), self.options_file)
-        build_serial = scn.generator_options(reader, s)
+        build_serial = scn.generator_options(reader, s, index_bytes=np.dtype(PETSc.IntType).itemsize)
         serial = run_on_root(comm, build_serial)
         names = comm.tompi4py().bcast((serial.material_names, sorted(serial.surfaces)) if comm.rank == 0 else None)
         self.material_names, self.surface_names = names
+        scn.check_ground_surface(reader, s, self.surface_names)
         self.materials = scn.read_materials(reader, self.material_names)
         self.drawdown = scn.read_drawdown(reader, self.material_names, s.water_density, s.gravity)
         self.flow_settings = None
@@ -79,6 +81,7 @@ class Simulation:
 
         def arrays():
             out = scn.boundary_arrays(serial, self.boundaries, s.ground_surface)
+            checks.check_held(serial.points, out[0], [b.name for b in self.boundaries])
             if self.flow_settings is not None:
                 from .solver.flow import FIXED_HEAD_BIT, fixed_head_vertices
                 out[0][:] |= FIXED_HEAD_BIT * fixed_head_vertices(serial, self.flow_settings.fixed_head_surfaces)
@@ -88,6 +91,10 @@ class Simulation:
                 from .mesh.fault import split_faults
                 split = split_faults(serial, fault_names)
                 topology = fault_topology(serial, split, self.materials)
+            written = 1 + s.time_steps // s.output_every + (s.time_steps % s.output_every > 0)
+            checks.check_output_space(s.output_dir, checks.output_bytes(
+                len(serial.points) + (len(split.split_vertices) if split else 0), len(serial.tets),
+                len(split.faces) if split else 0, written, flow=self.flow_settings is not None))
             return out, split, topology
         arr = run_on_root(comm, arrays)
         (mask, face_tag, ground), split, topology = arr if arr is not None else ((None, None, None), None, None)
@@ -286,14 +293,19 @@ class Simulation:
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Output")
         stage.push()
-        if self.comm.rank == 0:
+
+        def open_writer():
             from .io.output import RunWriter
             points, tets = self._output_mesh()
-            self.writer = RunWriter(self.settings.output_dir, points, tets, self.serial.cell_material,
-                                    self.material_names,
-                                    fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
-                                                                                self.split.fault_id))
-            self.writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            writer = RunWriter(self.settings.output_dir, points, tets, self.serial.cell_material,
+                               self.material_names,
+                               fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
+                                                                           self.split.fault_id))
+            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            return writer
+        writer = run_on_root(self.comm, open_writer)   # a failure to write ends every rank
+        if self.comm.rank == 0:
+            self.writer = writer
         self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
         stage.pop()
         self.wall["output"] += time.perf_counter() - t0

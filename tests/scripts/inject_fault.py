@@ -1,0 +1,49 @@
+"""Runs pfault's command line with a fault injected on one rank, to test that every rank still ends.
+
+    mpirun -n 2 python tests/scripts/inject_fault.py KIND RANK STEP SCENE.opts [-option value ...]
+
+KIND: ``bug`` (a RuntimeError) or ``memory`` (a MemoryError), raised in time step STEP on rank RANK only;
+``disk_full`` (OSError ENOSPC) when rank 0 writes the fields of time step STEP. Exits with pfault's exit code.
+"""
+
+import errno
+import sys
+
+import petsc4py
+
+from pfault.__main__ import check_arguments
+
+kind, rank, step = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+argv = [sys.argv[0]] + sys.argv[4:]
+scene, rest = check_arguments(argv)
+petsc4py.init([argv[0], "-options_file", scene] + rest)
+from petsc4py import PETSc  # noqa: E402
+
+from pfault import cli  # noqa: E402
+from pfault.io.output import RunWriter  # noqa: E402
+from pfault.simulation import Simulation  # noqa: E402
+
+solve, write_step = Simulation._solve, RunWriter.write_step
+calls = {"write": 0}
+
+
+def faulty_solve(self, t, t_prev=0.0):
+    here = PETSc.COMM_WORLD.rank == rank and abs(t - self.settings.time_end * step / self.settings.time_steps) \
+        < 1e-9 * self.settings.time_end
+    if here and kind == "bug":
+        raise RuntimeError(f"injected fault in step {step}")
+    if here and kind == "memory":
+        raise MemoryError(f"injected: unable to allocate 8 GiB in step {step}")
+    return solve(self, t, t_prev)
+
+
+def faulty_write_step(self, t, point_data, cell_data):
+    calls["write"] += 1
+    if calls["write"] == step + 1:          # call 1 is the initial state
+        raise OSError(errno.ENOSPC, "No space left on device", "fields.h5")
+    return write_step(self, t, point_data, cell_data)
+
+
+Simulation._solve = faulty_solve
+RunWriter.write_step = faulty_write_step
+sys.exit(cli.main(scene, argv))

@@ -1,0 +1,310 @@
+"""Catalogue of bad inputs and faults, at 1 and 2 ranks.
+
+Each case asserts the exit code, the one line that names the problem (printed once, without a traceback
+unless it is a bug), that every rank ends (mpirun returns before the timeout only when all its ranks have
+ended; the whole process group is killed otherwise) and what is on disk afterwards: no output directory,
+or the content a previous run left there untouched.
+"""
+
+import functools
+import json
+import os
+import signal
+import subprocess
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import pytest
+
+from conftest import PY, REPO, mpi_env
+
+OED = "config/oedometer.opts"
+TIMEOUT = 60
+FREE_SIDES = ["-pfault_bc_xmin_type", "free", "-pfault_bc_xmax_type", "free", "-pfault_bc_ymin_type", "free",
+              "-pfault_bc_ymax_type", "free"]
+FLOW_SCENE = """# a 2x2x2-cell box drained by one well
+-pfault_box_size 10,10,20
+-pfault_box_cells 2,2,2
+-pfault_material_soil_young_modulus 10*MPa
+-pfault_material_soil_poisson_ratio 0.25
+-pfault_material_soil_hydraulic_conductivity 1*m/day
+-pfault_bc_xmin_type roller
+-pfault_bc_xmax_type roller
+-pfault_bc_ymin_type roller
+-pfault_bc_ymax_type roller
+-pfault_bc_bottom_type fixed
+-pfault_flow true
+-pfault_flow_wells 5,5
+-pfault_flow_well_screen -1,-15
+-pfault_flow_well_rate 0:0,1*day:3*L/s
+-pfault_flow_fixed_head_surfaces xmin
+-pfault_time_end 1*day
+-pfault_time_steps 2
+-pfault_solver mumps
+"""
+
+
+def run_pfault(args, ranks, timeout=TIMEOUT):
+    """Run ``python ARGS`` on 1 rank or under mpirun; kill the whole process group on timeout."""
+    cmd = [PY] + args if ranks == 1 else ["mpirun", "-n", str(ranks), "--oversubscribe", PY] + args
+    proc = subprocess.Popen(cmd, cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        pytest.fail(f"{' '.join(args)} on {ranks} rank(s) did not end within {timeout} s\n{out[-2000:]}\n"
+                    f"{err[-2000:]}")
+    return proc.returncode, out, err
+
+
+def write(path, text):
+    path.write_text(text)
+    return str(path)
+
+
+@dataclass
+class Case:
+    id: str
+    args: Callable          # (tmp_path, out, ranks) -> arguments after the interpreter
+    code: int
+    message: str
+    disk: str = "none"      # none: no output dir | kept: a previous run's files untouched | file: a file
+                            # in the way untouched | partial: a run that stopped, without summary.json
+
+
+def scene(*extra):
+    return lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", str(out), *extra]
+
+
+def scene_file(text, *extra):
+    return lambda tmp, out, ranks: ["-m", "pfault", write(tmp / "scene.opts", text), "-pfault_output_dir",
+                                    str(out), *extra]
+
+
+def inject(kind, rank, step):
+    """A fault on one rank (rank 0 when there is only one), in time step ``step``."""
+    return lambda tmp, out, ranks: ["tests/scripts/inject_fault.py", kind, str(min(rank, ranks - 1)), str(step),
+                                    OED, "-pfault_output_dir", str(out)]
+
+
+def include_loop(tmp, out, ranks):
+    """a.opts includes b.opts, which includes a.opts again."""
+    write(tmp / "b.opts", f"-options_file {OED}\n-options_file {tmp / 'a.opts'}\n")
+    return ["-m", "pfault", write(tmp / "a.opts", f"-options_file {tmp / 'b.opts'}\n"), "-pfault_output_dir", str(out)]
+
+
+@functools.lru_cache(maxsize=None)
+def petsc_index_bytes():
+    """Size of PETSc's indices, asked of a separate process (MPI is not started in the test process)."""
+    code = ("import petsc4py, numpy; petsc4py.init([]); from petsc4py import PETSc; "
+            "print(numpy.dtype(PETSc.IntType).itemsize)")
+    return int(subprocess.run([PY, "-c", code], env=mpi_env(), capture_output=True, text=True, timeout=TIMEOUT,
+                              check=True).stdout.split()[-1])
+
+
+BINARY = "\x7fELF\x02\x01\x01\x00\x00\x00" + "\x00" * 40
+
+CASES = [
+    # usage: exit 2
+    Case("no_scene", lambda tmp, out, ranks: ["-m", "pfault"], 2, "pfault: error: no scene file given"),
+    Case("missing_scene", lambda tmp, out, ranks: ["-m", "pfault", "config/no_such.opts"], 2,
+         "scene file 'config/no_such.opts' not found"),
+    Case("scene_is_a_directory", lambda tmp, out, ranks: ["-m", "pfault", "config"], 2,
+         "scene file 'config' is not a file"),
+    Case("second_scene_file", scene("config/demo.opts"), 2,
+         "a second scene file 'config/demo.opts' after config/oedometer.opts"),
+    Case("stray_argument", scene("-pfault_time_steps", "2", "3"), 2,
+         "unexpected argument '3' after '-pfault_time_steps 2'"),
+    Case("scene_after_options", lambda tmp, out, ranks: ["-m", "pfault", "-pfault_time_steps", "2", OED], 2,
+         "the scene file 'config/oedometer.opts' must come first"),
+    # scene files: exit 1
+    Case("binary_scene", scene_file(BINARY), 1, "scene.opts: not a text options file (binary content)"),
+    Case("line_without_option", scene_file(f"-options_file {OED}\nfoo bar\n"), 1,
+         "scene.opts line 2: 'foo' is not an option name"),
+    Case("two_options_on_a_line", scene_file(f"-options_file {OED}\n-pfault_time_steps 2 -pfault_time_end 3\n"),
+         1, "scene.opts line 2: two options on one line (-pfault_time_steps ... -pfault_time_end)"),
+    Case("two_values", scene_file(f"-options_file {OED}\n-pfault_box_size 10, 10, 100\n"), 1,
+         "line 2: -pfault_box_size has more than one value ('10, 10, 100')"),
+    Case("missing_nested_file", scene_file(f"-options_file {OED}\n-options_file config/solver/none.opts\n"), 1,
+         "line 2: -options_file config/solver/none.opts: no such file"),
+    Case("include_loop", include_loop, 1, "is already being read (the files include each other)"),
+    Case("missing_options_file_on_command_line", scene("-options_file", "none.opts"), 1,
+         "on the command line: -options_file none.opts: no such file"),
+    # option values: exit 1
+    Case("length_given_as_pressure", scene("-pfault_box_size", "10,10,100*MPa"), 1,
+         "-pfault_box_size: '100*MPa' is a pressure, but this option takes a length in m"),
+    Case("time_given_as_length", scene("-pfault_time_end", "10*m"), 1,
+         "-pfault_time_end: '10*m' is a length, but this option takes a time in s"),
+    Case("unit_on_a_plain_number", scene("-pfault_material_soil_poisson_ratio", "0.25*MPa"), 1,
+         "-pfault_material_soil_poisson_ratio: '0.25*MPa' is a pressure, but this option takes a plain number"),
+    Case("table_value_of_wrong_dimension", scene("-pfault_material_soil_pressure_change", "0:0,10:-1*m"), 1,
+         "-pfault_material_soil_pressure_change: '-1*m' is a length, but this option takes a pressure in Pa"),
+    Case("table_time_of_wrong_dimension", scene("-pfault_material_soil_pressure_change", "0:0,1*MPa:-1*MPa"), 1,
+         "-pfault_material_soil_pressure_change: '1*MPa' is a pressure, but this option takes a time in s"),
+    Case("infinite_end_time", scene("-pfault_time_end", "1e999"), 1, "-pfault_time_end: '1e999' is not a finite"),
+    Case("overflow_through_unit", scene("-pfault_material_soil_young_modulus", "1e300*GPa"), 1,
+         "-pfault_material_soil_young_modulus: '1e300*GPa' is not a finite number"),
+    Case("not_a_number", scene("-pfault_time_end", "soon"), 1, "-pfault_time_end: cannot read 'soon' as a number"),
+    Case("unknown_unit", scene("-pfault_time_end", "10*years"), 1, "-pfault_time_end: unknown unit 'years'"),
+    Case("negative_k0", scene("-pfault_geostatic", "true", "-pfault_geostatic_k0", "-0.5"), 1,
+         "-pfault_geostatic_k0: must not be negative, got -0.5"),
+    Case("k0_old_unset_value", scene("-pfault_geostatic", "true", "-pfault_geostatic_k0", "-1"), 1,
+         "-pfault_geostatic_k0: must not be negative, got -1"),
+    Case("output_every_zero", scene("-pfault_output_every", "0"), 1, "-pfault_output_every: must be at least 1"),
+    Case("fractional_cells", scene("-pfault_box_cells", "1.5,1,2"), 1,
+         "-pfault_box_cells: '1.5' is not a whole number"),
+    Case("zero_cells", scene("-pfault_box_cells", "1,1,0"), 1,
+         "-pfault_box_cells: need at least one cell per direction"),
+    Case("negative_box_size", scene("-pfault_box_size", "10,10,-100"), 1, "-pfault_box_size: lengths must be "
+         "positive, got 10,10,-100"),
+    Case("zero_time_steps", scene("-pfault_time_steps", "0"), 1, "-pfault_time_steps: need at least one step"),
+    Case("misspelled_option", scene("-pfault_bc_top_typ", "free"), 1, "did you mean -pfault_bc_top_type?"),
+    Case("bad_choice", scene("-pfault_bc_top_type", "clamped"), 1, "-pfault_bc_top_type: 'clamped' is not one of"),
+    Case("missing_mesh_file", scene("-pfault_mesh_file", "nowhere.msh"), 1,
+         "-pfault_mesh_file: no such file 'nowhere.msh'"),
+    Case("misspelled_ground_surface", scene("-pfault_ground_surface", "tpo"), 1,
+         "-pfault_ground_surface tpo: no such physical surface in the mesh; give one of bottom, top, xmax", "kept"),
+    Case("unused_solver_option", scene("-ksp_rtoll", "1e-3"), 1, "unused option -ksp_rtoll", "kept"),
+    Case("box_beyond_petsc_indices", scene("-pfault_box_cells", "3000,3000,3000"), 1,
+         "-pfault_box_cells 3000,3000,3000: 8.11e+10 displacement unknowns exceed the 32-bit indices"),
+    # boundary conditions that do not hold the body: exit 1, found from the constraints before any solve
+    Case("floating_body", scene(*FREE_SIDES, "-pfault_bc_bottom_type", "free"), 1,
+         "leave the body free to translate along x, y and z and to rotate about x, y and z (nothing holds it); "
+         "fix or roll a surface, e.g. -pfault_bc_bottom_type fixed", "kept"),
+    Case("roller_bottom_only", scene(*FREE_SIDES, "-pfault_bc_bottom_type", "roller"), 1,
+         "free to translate along x and y and to rotate about z"),
+    Case("no_vertical_support", scene("-pfault_bc_bottom_type", "free"), 1, "free to translate along z (nothing"),
+    Case("fault_scene_pulled_loose", lambda tmp, out, ranks: [
+        "-m", "pfault", "config/two_blocks.opts", "-pfault_output_dir", str(out), "-pfault_bc_xmin_type",
+        "traction"], 1, "free to translate along x and to rotate about y"),
+    # output: exit 4 (1 for an empty name), found before the first solve
+    Case("output_in_proc", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", "/proc/pfault_out"], 4,
+         "-pfault_output_dir /proc/pfault_out: cannot create files in '/proc'"),
+    Case("output_is_a_file", scene(), 4, "it exists and is not a directory; remove it", "file"),
+    Case("output_below_a_file", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir",
+                                                         str(out / "run")], 4, "is not a directory", "file"),
+    Case("output_empty_name", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", ""], 1,
+         "-pfault_output_dir: empty directory name"),
+    Case("output_larger_than_disk", scene("-pfault_time_steps", "1000000000000", "-pfault_box_cells", "1,1,1"), 4,
+         "the output needs about", "kept"),
+    # a solve that fails: exit 3
+    Case("flow_not_converged", scene_file(FLOW_SCENE, "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
+         "groundwater flow: KSP flow_ did not converge at t = 43200 s (reason -3)", "kept"),
+    # faults on one rank only (rank 1 of 2): the job ends with the line and the code
+    Case("bug_on_one_rank", inject("bug", 1, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial"),
+    Case("memory_on_one_rank", inject("memory", 1, 3), 5, "out of memory (injected: unable to allocate 8 GiB",
+         "partial"),
+    Case("disk_full_during_run", inject("disk_full", 0, 3), 4,
+         "cannot write fields.h5: No space left on device; free space on that disk or choose another "
+         "-pfault_output_dir", "partial"),
+]
+
+
+def _snapshot(path):
+    if not os.path.exists(path):
+        return None
+    if os.path.isfile(path):
+        return (path.read_bytes(), os.stat(path).st_mtime_ns)
+    return {p.name: (p.read_bytes(), os.stat(p).st_mtime_ns) for p in sorted(path.iterdir())}
+
+
+def _prepare(case, out):
+    if case.disk == "kept":
+        out.mkdir()
+        (out / "summary.json").write_text(json.dumps({"scene": "previous run", "converged": True}))
+        (out / "fields.h5").write_bytes(np.arange(100, dtype=np.float64).tobytes())
+        for p in out.iterdir():
+            os.utime(p, ns=(10**18, 10**18))
+    elif case.disk == "file":
+        out.write_text("a file where the output directory would go\n")
+        os.utime(out, ns=(10**18, 10**18))
+
+
+def _error_lines(text):
+    return [line for line in text.splitlines() if line.startswith(("pfault: error", "pfault: internal error"))]
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_bad_input(tmp_path, case, ranks):
+    if case.id == "box_beyond_petsc_indices" and petsc_index_bytes() != 4:
+        pytest.skip("PETSc with 64-bit indices")
+    out = tmp_path / "out"
+    _prepare(case, out)
+    before = _snapshot(out)
+    code, stdout, stderr = run_pfault(case.args(tmp_path, out, ranks), ranks)
+    lines = _error_lines(stderr)
+    assert code == case.code, stdout[-2000:] + stderr[-3000:]
+    assert len(lines) == 1, stderr[-3000:]            # printed once, by one rank
+    assert case.message in lines[0], lines[0]
+    assert ("Traceback" in stderr) == (case.code == 6), stderr[-3000:]
+    if case.disk in ("none",):
+        assert not os.path.exists(out)
+    elif case.disk in ("kept", "file"):
+        assert _snapshot(out) == before
+    elif case.disk == "partial":
+        assert (out / "fields.h5").exists() and not (out / "summary.json").exists()
+
+
+def test_catalogue_size():
+    assert len(CASES) >= 40
+
+
+def test_box_larger_than_memory(tmp_path):
+    """A box whose serial mesh alone would not fit in memory is refused before numpy allocates it."""
+    from pfault.checks import available_memory
+    avail = available_memory()
+    if avail is None or avail > 300e9:
+        pytest.skip("needs a machine with less than 300 GB available")
+    out = tmp_path / "out"
+    code, _, stderr = run_pfault(scene("-pfault_box_cells", "700,700,700")(tmp_path, out, 1), 1)
+    lines = _error_lines(stderr)
+    assert code == 5 and len(lines) == 1, stderr
+    assert lines[0].startswith("pfault: error: -pfault_box_cells 700,700,700: building the mesh alone needs about "
+                               "343 GB, more than the "), lines[0]
+    assert lines[0].endswith("GB of memory available; use fewer cells"), lines[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_duplicate_option_in_one_file_warns(tmp_path, ranks):
+    """An option twice in the same file: one warning naming the value used; the run goes on."""
+    path = write(tmp_path / "scene.opts", f"-options_file {OED}\n-pfault_time_steps 2\n# later\n-pfault_time_steps 3\n")
+    code, stdout, stderr = run_pfault(["-m", "pfault", path, "-pfault_output_dir", str(tmp_path / "out")], ranks)
+    assert code == 0, stderr
+    warnings = [line for line in stderr.splitlines() if line.startswith("pfault: warning")]
+    assert warnings == [f"pfault: warning: -pfault_time_steps is given 2 times in {path} (lines 2, 4); the value "
+                        "used is '3'"]
+    with open(tmp_path / "out" / "summary.json") as fh:
+        assert len(json.load(fh)["steps"]) == 3
+
+
+def test_command_line_override_and_duplicates(tmp_path):
+    """The command line overriding the scene says nothing; an option twice on the command line warns."""
+    out = str(tmp_path / "out")
+    code, _, stderr = run_pfault(["-m", "pfault", OED, "-pfault_output_dir", out, "-pfault_time_steps", "2"], 1)
+    assert code == 0 and "warning" not in stderr
+    code, _, stderr = run_pfault(["-m", "pfault", OED, "-pfault_output_dir", out, "-pfault_time_steps", "2",
+                                  "-pfault_time_steps", "1"], 1)
+    assert code == 0
+    assert [line for line in stderr.splitlines() if "warning" in line] == [
+        "pfault: warning: -pfault_time_steps is given 2 times on the command line; the value used is '1'"]
+
+
+def test_free_rigid_motions():
+    """The rigid-body check on the corners of a unit cube: which motions the constrained components leave free."""
+    from pfault.checks import free_rigid_motions
+    x = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float) * 100.0 + 5e5
+    mask = np.zeros(8, dtype=np.int64)
+    assert free_rigid_motions(x, mask) == ([0, 1, 2], [0, 1, 2], 6)
+    mask[0] = 7                                   # one point fixed: rotations about it
+    assert free_rigid_motions(x, mask) == ([], [0, 1, 2], 3)
+    mask[4] = 7                                   # a second one on the x axis through it: rotation about x
+    assert free_rigid_motions(x, mask) == ([], [0], 1)
+    mask[2] = 7                                   # a third, off that axis: held
+    assert free_rigid_motions(x, mask) == ([], [], 0)
+    bottom = np.where(x[:, 2] == x[:, 2].min(), 4, 0)    # uz on the plane z = min: x, y and rotation about z
+    assert free_rigid_motions(x, bottom) == ([0, 1], [2], 3)
