@@ -1,6 +1,7 @@
 """Command line: ``mpirun -n 2 python -m pfault SCENE.opts [-option value ...]``.
 
-Exit codes: 0 done, 1 bad input, 2 usage, 3 a step did not converge.
+Exit codes: 0 done, 1 bad input, 2 usage, 3 a step did not converge, 4 interrupted (SIGTERM, SIGINT or
+SIGUSR1: the run stopped after its current step; summary.json says "interrupted": true).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from petsc4py import PETSc
 from .errors import InputError
 
 EXIT_OK, EXIT_INPUT, EXIT_USAGE, EXIT_NOT_CONVERGED = 0, 1, 2, 3
+EXIT_INTERRUPTED = 4
 
 
 def main(options_file, argv):
@@ -40,4 +42,8 @@ def main(options_file, argv):
     if not summary["converged"]:
         PETSc.Sys.Print("pfault: a step did not converge; see summary.json")
         return EXIT_NOT_CONVERGED
+    if summary.get("interrupted"):
+        PETSc.Sys.Print(f"pfault: interrupted after step {summary['completed_steps'][-1]}; continue it with "
+                        f"-pfault_restart {sim.settings.output_dir}")
+        return EXIT_INTERRUPTED
     return EXIT_OK
