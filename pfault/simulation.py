@@ -190,6 +190,8 @@ class Simulation:
         return np.concatenate([pts, pts[sv]]), tets
 
     def _output(self, step, t, u_rel_local, initial=False):
+        """Write one output step (fields, fault, land surface); returns the hazard maxima of the land surface
+        (every rank)."""
         p = self.problem
         both = np.concatenate([u_rel_local[self.dofmap.vertex_dofs(0)], u_rel_local[self.dofmap.vertex_dofs(1)]],
                               axis=1)
@@ -202,6 +204,7 @@ class Simulation:
         head = None
         if self.flow is not None:
             head = distributed.gather_vertex_values(self.mesh, self.flow.vertex_head().reshape(-1, 1))
+        maxima = None
         if self.comm.rank == 0:
             u = pts[:, :3]
             if self.split is not None:
@@ -216,6 +219,19 @@ class Simulation:
                                                          "stress": cells[:, 1:10]})
             if faults is not None:
                 self.writer.write_fault_step(step, t, faults)
+            maxima = self._surface_output(step, t, u)
+        return self.comm.tompi4py().bcast(maxima, root=0)
+
+    def _surface_output(self, step, t, u):
+        """Land-surface fields of one output step (rank 0): displacement and the earth-fissure hazard fields;
+        returns their maxima and where they are."""
+        from .io import hazard
+        surf = self.surface
+        if surf is None:
+            return None
+        fields = hazard.surface_fields(surf.points, surf.triangles, u[surf.vertices])
+        self.writer.write_surface_step(step, t, {"displacement": u[surf.vertices]}, fields)
+        return hazard.maxima(surf.points, surf.triangles, fields)
 
     def _open_output(self):
         """After the first solve (every solver option has been read by then): reject unused options, then
@@ -236,13 +252,17 @@ class Simulation:
         self.wall["output"] += time.perf_counter() - t0
 
     def _create_writer(self):
+        from .io import hazard
         from .io.output import RunWriter
         points, tets = self._output_mesh()
+        self.surface = hazard.land_surface(points, tets, self.serial, self.split, self.settings.ground_surface)
         out = self.settings.output_dir
         try:
             writer = RunWriter(out, points, tets, self.serial.cell_material, self.material_names,
                                fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
-                                                                           self.split.fault_id))
+                                                                           self.split.fault_id),
+                               surface_mesh=None if self.surface is None else (self.surface.points,
+                                                                               self.surface.triangles))
             writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
             if self.restart_dir:
                 writer.copy_steps(self.restart_dir, self.restart_step)
@@ -277,6 +297,7 @@ class Simulation:
         s = self.settings
         solve_stage = PETSc.Log.Stage("Solve")
         out_stage = PETSc.Log.Stage("Output")
+        self.surface = None
         times = np.linspace(0.0, s.time_end, s.time_steps + 1)
         if self.restart_dir:
             steps, first, offset = self._restart(times)
@@ -304,7 +325,9 @@ class Simulation:
                 out_stage.push()
                 if (index % s.output_every == 0 or index == s.time_steps or not rec["converged"]
                         or stop is not None):
-                    self._output(step, t, u_rel)
+                    hz = self._output(step, t, u_rel)
+                    if hz is not None:
+                        rec.update(hz)
                 self._step_done(steps, rec, step, t)
                 out_stage.pop()
                 self.wall["output"] += time.perf_counter() - t0
@@ -403,6 +426,8 @@ class Simulation:
             "interrupted": stop is not None,
             "completed_steps": [r["step"] for r in last if r["converged"]],
         }
+        from .io.hazard import summary_maxima
+        summary.update(summary_maxima(last))
         if stop is not None:
             summary["stop_signal"] = stop
         if self.restart_dir:

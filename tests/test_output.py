@@ -1,4 +1,5 @@
-"""Output that survives interruption; a new run never mixes its files with an old result.
+"""Output that survives interruption; a new run never mixes its files with an old result; the earth-fissure
+hazard map of the land surface.
 
 Interruptions are real signals sent to real runs (Queretaro at size factor 6: faults, flow, 6 steps) once the
 first step's progress line is printed: the run ends after its current step with exit code 4, every file is
@@ -82,7 +83,7 @@ def check_readable(run_dir):
         summary = json.load(fh)
     done = summary["completed_steps"]
     assert done == list(range(1, len(done) + 1))
-    for name in ("fields", "fault"):
+    for name in ("fields", "fault", "surface"):
         steps = read_series(os.path.join(run_dir, name + ".xdmf"))
         # the initial state (step 0) and every completed step
         assert len(steps) == len(done) + 1, name
@@ -239,3 +240,46 @@ def test_run_writer_stages_commits_and_abandons(tmp_path):
     assert sorted(os.listdir(out)) == ["fields.h5", "fields.xdmf", "log.txt", "summary.json"]
     assert (out / "log.txt").read_text() == "driver log"
     assert not [f for f in os.listdir(tmp_path) if ".pfault-" in f]
+
+
+# ------------------------------------------------------------------------------------------------------
+# the hazard map
+# ------------------------------------------------------------------------------------------------------
+def test_hazard_fields_of_an_affine_displacement():
+    """For u = A (x, y) + c the strain and tilt are exact on any triangles."""
+    from pfault.io import hazard
+    rng = np.random.default_rng(3)
+    pts = np.column_stack([rng.random((30, 2)) * 100.0, np.zeros(30)])
+    tris = np.array([rng.choice(30, 3, replace=False) for _ in range(40)])
+    A = np.array([[2e-3, -1e-3], [3e-3, -4e-3], [5e-4, -1.2e-3]])     # rows: u_x, u_y, u_z
+    u = pts[:, :2] @ A.T + np.array([0.1, 0.2, -0.3])
+    f = hazard.surface_fields(pts, tris, u)
+    exx, eyy, exy = A[0, 0], A[1, 1], 0.5 * (A[0, 1] + A[1, 0])
+    e1 = 0.5 * (exx + eyy) + np.hypot(0.5 * (exx - eyy), exy)
+    ok = np.abs(np.cross(pts[tris[:, 1], :2] - pts[tris[:, 0], :2], pts[tris[:, 2], :2] - pts[tris[:, 0], :2])) > 1e-6
+    assert np.allclose(f["horizontal_strain"][ok], e1, rtol=1e-9)
+    assert np.allclose(f["angular_distortion"][ok], np.hypot(*A[2]), rtol=1e-9)
+
+
+def test_fissure_hazard_map_of_wuxi(tmp_path):
+    """mpirun -n 2 python -m pfault config/wuxi.opts (coarse): the land surface's largest tensile strain lies
+    over the ridge crest, where the fissure opens (x = 1000 m): in a surface triangle that touches the fissure
+    trace, two orders of magnitude above the strain 300 m away from it."""
+    run_dir = tmp_path / "wuxi"
+    proc, s = run_scene("config/wuxi.opts", run_dir, ranks=2,
+                        extra=["-pfault_mesh_size_factor", "4", "-pfault_time_steps", "2"])
+    from pfault.io import figures as fg
+    surf = fg.read_surface(str(run_dir))
+    strain, tilt = surf.cell_data["horizontal_strain"], surf.cell_data["angular_distortion"]
+    i = int(np.argmax(strain))
+    x = surf.points[surf.cells[i], 0]
+    assert np.any(np.abs(x - 1000.0) < 1e-6), x
+    centroid = surf.points[surf.cells].mean(axis=1)
+    far = np.abs(centroid[:, 0] - 1000.0) > 300.0
+    assert strain[far].max() < 0.02 * strain[i]
+    assert s["max_horizontal_strain"] == pytest.approx(strain[i], rel=1e-12)
+    assert s["max_horizontal_strain_xy"] == pytest.approx(centroid[i, :2].tolist(), rel=1e-12)
+    assert s["max_angular_distortion"] == pytest.approx(tilt.max(), rel=1e-12)
+    assert abs(s["max_angular_distortion_xy"][0] - 1000.0) < 100.0
+    # the fissure opens by centimetres; the strain next to it is of order 1e-3
+    assert 1e-3 < s["max_horizontal_strain"] < 1e-1 and s["max_fault_opening_m"] > 0.01

@@ -4,7 +4,7 @@ A 4-step run against a 2-step run (to half the end time) continued to 4 steps, o
 without faults or flow (oedometer), one with faults and groundwater flow (Queretaro at size factor 6:
 geostatic start, augmented slip direction with its predictor, wells) and one with an opening fissure (Wuxi at
 size factor 4: increment slip direction). Compared: the summary maxima, and every dataset of every output step
-in fields.h5 and fault.h5 (steps 1-2 copied from the first run, 3-4 recomputed), each relative to
+in fields.h5, fault.h5 and surface.h5 (steps 1-2 copied from the first run, 3-4 recomputed), each relative to
 its largest magnitude. Same rank count: observed agreement ~1e-15 (the solver sees the same state, bit for bit,
 up to the Newton path of its first step, which the checkpoint restores).
 
@@ -28,7 +28,8 @@ SCENES = {
                   "5*year"),
     "wuxi": ("config/wuxi.opts", ("-pfault_mesh_size_factor", "4"), "10*year", "5*year"),
 }
-MAXIMA = ("max_subsidence_m", "max_horizontal_displacement_m", "max_fault_opening_m", "max_fault_slip_m")
+MAXIMA = ("max_subsidence_m", "max_horizontal_displacement_m", "max_fault_opening_m", "max_fault_slip_m",
+          "max_horizontal_strain", "max_angular_distortion")
 
 
 def _steps(extra, n, end):
@@ -40,7 +41,7 @@ def compare_runs(ref_dir, other_dir, rtol):
     the summary maxima; asserts each is within rtol."""
     import h5py
     worst = 0.0
-    for name in ("fields", "fault"):
+    for name in ("fields", "fault", "surface"):
         path = os.path.join(ref_dir, name + ".h5")
         if not os.path.exists(path):
             assert not os.path.exists(os.path.join(other_dir, name + ".h5"))

@@ -13,7 +13,9 @@ writes into each RUN_DIR:
   for groundwater-flow scenes a second panel maps the drawdown in the node layer where it is largest
   (like Figs 4 and 7);
 - ``histories.png``: maximum subsidence, opening, slip (and drawdown) against time from summary.json, with
-  the Newton iterations and active-set updates per step.
+  the Newton iterations and active-set updates per step;
+- ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.io.hazard): largest
+  horizontal principal strain and angular distortion, with the fault traces and the maxima marked.
 
 Each PNG is written whole into ``NAME.png.tmp`` and renamed over the old one.
 
@@ -37,7 +39,7 @@ import numpy as np
 
 YEAR = 365.25 * 86400.0
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-FIGURES = ("fault_opening_slip.png", "subsidence_map.png", "histories.png")
+FIGURES = ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png")
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -492,6 +494,72 @@ def histories_figure(run_dir, out=None):
     return _save(fig, out)
 
 
+def read_surface(run_dir, step=-1):
+    """Land-surface triangles and fields at one time: point data ``displacement`` (m), cell data
+    ``horizontal_strain``, ``angular_distortion`` (pfault.io.hazard)."""
+    return _read_series(os.path.join(run_dir, "surface.xdmf"), step, "triangle")
+
+
+def has_surface(run_dir):
+    return os.path.exists(os.path.join(run_dir, "surface.xdmf"))
+
+
+def hazard_figure(run_dir, out=None, step=-1):
+    """Earth-fissure hazard map of the land surface at one output time: largest horizontal principal strain
+    and angular distortion per surface triangle, fault traces dashed, maxima marked, and the largest value
+    of each over y against x; returns the PNG path."""
+    plt = _pyplot()
+    from matplotlib.tri import Triangulation
+    snap = read_surface(run_dir, step)
+    pts, tris, cd = snap.points, snap.cells, snap.cell_data
+    trace = _fault_trace(run_dir, pts[:, 2].max())
+    km = 1e-3
+    lx, ly = np.ptp(pts[:, 0]), np.ptp(pts[:, 1])
+    map_h = min(max(5.0 * ly / max(lx, 1e-300), 4.0), 8.0)
+    fig = plt.figure(figsize=(max(2 * map_h * lx / max(ly, 1e-300) * 1.35 + 1.5, 9.0), map_h + 3.6),
+                     constrained_layout=True)
+    gs = fig.add_gridspec(2, 2, height_ratios=[map_h, 2.6])
+    tri = Triangulation(pts[:, 0] * km, pts[:, 1] * km, tris)
+    centroids = pts[tris].mean(axis=1)
+    panels = (("horizontal_strain", "RdBu_r", "largest horizontal principal strain (tension +)"),
+              ("angular_distortion", "viridis", "angular distortion |grad u_z|"))
+    for col, (key, cmap, label) in enumerate(panels):
+        ax = fig.add_subplot(gs[0, col])
+        val = cd[key]
+        i = int(np.argmax(val))
+        vmax = max(float(np.max(np.abs(val))), 1e-12)
+        vmin = -vmax if key == "horizontal_strain" else 0.0
+        pc = ax.tripcolor(tri, facecolors=val, cmap=cmap, vmin=vmin, vmax=vmax, edgecolors="none")
+        fig.colorbar(pc, ax=ax, shrink=0.9, pad=0.02).set_label(label)
+        if trace is not None:
+            ax.plot(trace[:, 0] * km, trace[:, 1] * km, "k--", lw=1.0, label="fault trace")
+        ax.plot(centroids[i, 0] * km, centroids[i, 1] * km, "*", ms=13, mfc="gold", mec="black",
+                label=f"max {val[i]:.3g} at ({centroids[i, 0]:.0f}, {centroids[i, 1]:.0f}) m")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (km)")
+        ax.set_ylabel("y (km)")
+        ax.set_title(f"{label.split(' (')[0]}, {_title_time(snap.time)}", fontsize=10)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8, ncol=1, framealpha=0.85)
+    # across the maps: the largest value over y in bins of x
+    ax = fig.add_subplot(gs[1, :])
+    nbins = int(np.clip(len(tris) // 20, 20, 400))
+    for key, color in (("horizontal_strain", "tab:red"), ("angular_distortion", "tab:green")):
+        c, v = _binned(centroids[:, 0], cd[key], nbins, "max")
+        ax.plot(c * km, v, color=color, label=f"largest {key.replace('_', ' ')} over y")
+    if trace is not None:
+        for xt in np.unique(np.round(trace[:, 0], 3)):
+            ax.axvline(xt * km, color="k", ls="--", lw=0.8)
+    ax.set_xlim(pts[:, 0].min() * km, pts[:, 0].max() * km)
+    ax.set_xlabel("x (km)")
+    ax.set_ylabel("strain, slope (-)")
+    ax.set_title("profile across the maps (dashed: fault trace)", fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.suptitle(f"{_scene(run_dir)}: earth-fissure hazard of the land surface")
+    out = out or os.path.join(run_dir, FIGURES[3])
+    return _save(fig, out)
+
+
 def make_figures(run_dir, step=-1):
     """All figures of a run directory; returns the paths written."""
     paths = []
@@ -499,4 +567,6 @@ def make_figures(run_dir, step=-1):
         paths.append(fault_figure(run_dir, step=step))
     paths.append(subsidence_figure(run_dir, step=step))
     paths.append(histories_figure(run_dir))
+    if has_surface(run_dir):
+        paths.append(hazard_figure(run_dir, step=step))
     return paths

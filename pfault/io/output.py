@@ -1,7 +1,7 @@
 """Run output written by rank 0 in the serial (partition-independent) numbering.
 
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
-- ``fault.xdmf`` + ``fault.h5`` (scenes with faults)
+- ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
 - ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash
 - ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima and wall times
 - ``checkpoint.h5``: the state after the last completed step (pfault.io.checkpoint)
@@ -26,10 +26,10 @@ import subprocess
 import numpy as np
 
 # names pfault writes into a run directory: replaced by a new run; anything else there is carried over
-SERIES = ("fields", "fault")
+SERIES = ("fields", "fault", "surface")
 RUN_FILES = frozenset([f"{s}.{e}" for s in SERIES for e in ("xdmf", "h5")]
                       + ["summary.json", "options.txt", "versions.json", "materials.json", "checkpoint.h5",
-                         "fault_opening_slip.png", "subsidence_map.png", "histories.png"])
+                         "fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"])
 TMP_SUFFIX = ".tmp"
 
 
@@ -230,7 +230,7 @@ class RunWriter:
     ``path`` is the output directory; the files go to a staging sibling until ``commit`` puts them in place
     (``self.dir`` is where they are now)."""
 
-    def __init__(self, path, points, cells, cell_material, material_names, fault_mesh=None):
+    def __init__(self, path, points, cells, cell_material, material_names, fault_mesh=None, surface_mesh=None):
         self.path = os.path.realpath(path)     # a symbolic link to a directory: the run goes where it points
         if os.path.exists(self.path) and not os.path.isdir(self.path):
             raise FileExistsError(f"{path} exists and is not a directory")
@@ -243,6 +243,8 @@ class RunWriter:
             fpoints, ffaces, fid = fault_mesh
             self.series["fault"] = XdmfSeries(self.dir, "fault", fpoints, ffaces)
             self.fault_id = np.asarray(fid, dtype=np.int64)
+        if surface_mesh is not None:
+            self.series["surface"] = XdmfSeries(self.dir, "surface", *surface_mesh)
 
     def file(self, name):
         return os.path.join(self.dir, name)
@@ -256,6 +258,9 @@ class RunWriter:
         cd = {"fault": self.fault_id}
         cd.update(data)
         self.series["fault"].write_step(step, t, None, cd)
+
+    def write_surface_step(self, step, t, point_data, cell_data):
+        self.series["surface"].write_step(step, t, point_data, cell_data)
 
     def copy_steps(self, run_dir, last_step):
         """Restart: the output steps up to ``last_step`` of the run in ``run_dir`` start this run's series."""
