@@ -194,11 +194,13 @@ SPECS = [
        "sub-steps, halving up to this many times (0: no retry); the pore pressure of a flow model is "
        "interpolated linearly in time between its steps (with the augmented slip direction the step is first "
        "redone with the increment direction, which then stays)"),
-    # output: restart
+    # output: restart and figures
     _s("pfault_restart", "string", "", "", "run directory to continue from its last completed step (its "
        "checkpoint.h5), up to -pfault_time_end; the checkpoint's time must be a point of the time grid "
        "-pfault_time_end and -pfault_time_steps give; writes into that directory unless -pfault_output_dir "
        "is given"),
+    _s("pfault_figures", "bool", True, "", "write PNG figures next to the output at the end of the run: fault "
+       "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map"),
 ]
 
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")

@@ -58,6 +58,7 @@ class Simulation:
         stage.push()
         self.settings = s = scn.read_settings(reader, self.options_file)
         self.restart_dir = reader.get("pfault_restart")
+        self.figures = reader.get("pfault_figures")
         if self.restart_dir:
             run_on_root(comm, _check_restart_dir, self.restart_dir)
             if not reader.has("pfault_output_dir"):
@@ -442,8 +443,8 @@ class Simulation:
         return self.summary
 
     def write_summary(self, total):
-        """The final summary.json (rank 0); every rank waits for rank 0 to be done, so that no rank ends (with
-        a non-zero exit code that makes mpirun kill the others) while files are written."""
+        """The final summary.json, then the figures (rank 0); every rank waits for rank 0 to be done, so that
+        no rank ends (with a non-zero exit code that makes mpirun kill the others) while files are written."""
         self.wall["total"] = total
         self.wall["assembly"] = self.problem.assembly_wall
         self.summary["wall_s"] = dict(self.wall)
@@ -451,6 +452,11 @@ class Simulation:
             self.writer.write_summary(self.summary)
             self.writer.commit()
             self.writer.close()
+            if self.figures and not self.summary["interrupted"]:
+                from .io.figures import write_run_figures
+                t0 = time.perf_counter()
+                paths = write_run_figures(self.writer.dir)
+                _print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
         self.comm.barrier()
 
     def destroy(self):

@@ -1,5 +1,5 @@
-"""Output that survives interruption; a new run never mixes its files with an old result; the earth-fissure
-hazard map of the land surface.
+"""Output that survives interruption; a new run never mixes its files with an old result; figures and the
+earth-fissure hazard map of a plain run.
 
 Interruptions are real signals sent to real runs (Queretaro at size factor 6: faults, flow, 6 steps) once the
 first step's progress line is printed: the run ends after its current step with exit code 4, every file is
@@ -24,7 +24,7 @@ from test_restart import compare_runs
 QRO = "config/queretaro.opts"
 # -flow_ksp_rtol 1e-13: 2-rank flow solves are reproducible from run to run only to ~ksp_rtol (test_restart.py)
 QRO_OPTS = ["-pfault_mesh_size_factor", "6", "-flow_ksp_rtol", "1e-13", "-pfault_time_steps", "6",
-            "-pfault_time_end", "6*year"]
+            "-pfault_time_end", "6*year", "-pfault_figures", "false"]
 TIMEOUT = 120
 
 
@@ -148,7 +148,7 @@ def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path):
     in the middle of the next. Either way every completed step is readable and the run continues from it
     (here by one more step of the same length)."""
     run_dir = str(tmp_path / "run")
-    opts = [*QRO_OPTS[:4], "-pfault_time_steps", "60", "-pfault_time_end", "6*year"]
+    opts = [*QRO_OPTS[:4], "-pfault_time_steps", "60", "-pfault_time_end", "6*year", "-pfault_figures", "false"]
     code, out, err = start_and_signal([QRO, "-pfault_output_dir", run_dir, *opts], 2, _to_process(signal.SIGTERM))
     assert code != 0
     summary = check_readable(run_dir)
@@ -191,8 +191,8 @@ def test_new_run_replaces_an_old_result_only_after_its_first_step(tmp_path):
     assert proc.returncode != 0 and _snapshot(run_dir) == old
     # a run that completes a step replaces it: no file of the old run is left (no fault output now)
     code, out, err = start_and_signal(["config/oedometer.opts", "-pfault_output_dir", str(run_dir),
-                                       "-pfault_time_steps", "2000", "-pfault_output_every", "1000"], 1,
-                                      _to_process(signal.SIGTERM))
+                                       "-pfault_time_steps", "2000", "-pfault_output_every", "1000",
+                                       "-pfault_figures", "false"], 1, _to_process(signal.SIGTERM))
     assert code == 4, err
     new = _snapshot(run_dir)
     assert new["notes.txt"] == b"kept"
@@ -243,7 +243,7 @@ def test_run_writer_stages_commits_and_abandons(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------------
-# the hazard map
+# figures and the hazard map
 # ------------------------------------------------------------------------------------------------------
 def test_hazard_fields_of_an_affine_displacement():
     """For u = A (x, y) + c the strain and tilt are exact on any triangles."""
@@ -261,13 +261,16 @@ def test_hazard_fields_of_an_affine_displacement():
     assert np.allclose(f["angular_distortion"][ok], np.hypot(*A[2]), rtol=1e-9)
 
 
-def test_fissure_hazard_map_of_wuxi(tmp_path):
-    """mpirun -n 2 python -m pfault config/wuxi.opts (coarse): the land surface's largest tensile strain lies
-    over the ridge crest, where the fissure opens (x = 1000 m): in a surface triangle that touches the fissure
-    trace, two orders of magnitude above the strain 300 m away from it."""
+def test_plain_run_writes_figures_and_the_fissure_hazard_map(tmp_path):
+    """mpirun -n 2 python -m pfault config/wuxi.opts (coarse): the figures, and the land surface's largest
+    tensile strain over the ridge crest, where the fissure opens (x = 1000 m): in a surface triangle that
+    touches the fissure trace, two orders of magnitude above the strain 300 m away from it."""
     run_dir = tmp_path / "wuxi"
     proc, s = run_scene("config/wuxi.opts", run_dir, ranks=2,
-                        extra=["-pfault_mesh_size_factor", "4", "-pfault_time_steps", "2"])
+                        extra=["-pfault_mesh_size_factor", "4", "-pfault_time_steps", "2", "-pfault_figures", "true"])
+    for name in ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"):
+        with open(run_dir / name, "rb") as fh:
+            assert fh.read(8) == b"\x89PNG\r\n\x1a\n", name
     from pfault.io import figures as fg
     surf = fg.read_surface(str(run_dir))
     strain, tilt = surf.cell_data["horizontal_strain"], surf.cell_data["angular_distortion"]

@@ -1,8 +1,10 @@
-"""PNG figures of a run directory (matplotlib, Agg backend), from the files pfault.io.output wrote.
+"""PNG figures of a run directory (matplotlib, Agg backend), on rank 0 from the files pfault.io.output wrote.
+
+A run writes them at its end (``-pfault_figures``, default true; pfault.simulation), and
 
     python -m pfault.study.figures RUN_DIR [RUN_DIR ...] [--step K]
 
-writes into each RUN_DIR:
+writes them into any RUN_DIR (an interrupted run's too):
 
 - ``fault_opening_slip.png`` (faults only): opening and slip magnitude over the fault plane, one colour per
   fault triangle, in fault-plane coordinates ((y, z) for a vertical fault x = const; the vertical axis is
@@ -570,3 +572,15 @@ def make_figures(run_dir, step=-1):
     if has_surface(run_dir):
         paths.append(hazard_figure(run_dir, step=step))
     return paths
+
+
+def write_run_figures(run_dir):
+    """The figures a finished run writes next to its output (rank 0). A figure that fails is reported, not
+    raised: the run's results are on disk already."""
+    import sys
+    try:
+        return make_figures(run_dir)
+    except Exception as exc:          # noqa: BLE001 (plotting must not turn a finished run into a failure)
+        sys.stderr.write(f"pfault: warning: figures not written ({type(exc).__name__}: {exc}); "
+                         f"python -m pfault.study.figures {run_dir} makes them\n")
+        return []

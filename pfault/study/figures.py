@@ -3,8 +3,8 @@
     python -m pfault.study.figures RUN_DIR [RUN_DIR ...] [--step K]
 
 ``K`` is the index of the output time (default -1: the last one). The figures and the readers of a run
-directory (``read_summary``, ``read_fields``, ``read_fault``, ``top_surface``, ...) live in pfault.io.figures
-(next to the writer of the files they read); they are re-exported here for the case studies.
+directory (``read_summary``, ``read_fields``, ``read_fault``, ``top_surface``, ...) live in pfault.io.figures,
+which a plain run also uses to draw them at its end; they are re-exported here for the case studies.
 """
 
 from __future__ import annotations
