@@ -266,7 +266,7 @@ class Simulation:
                                                                                self.surface.triangles))
             writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
             if self.restart_dir:
-                writer.copy_steps(self.restart_dir, self.restart_step)
+                writer.continue_from(self.restart_dir, self.restart_step)
         except (OSError, ValueError) as exc:
             raise InputError(f"-pfault_output_dir {out}: cannot write there ({exc})") from None
         return writer

@@ -115,3 +115,17 @@ def test_restart_rejects_a_time_grid_without_the_checkpoint(tmp_path):
                         check=False)
     assert proc.returncode == 1 and "checkpoint has nodes" in proc.stderr
     assert sorted(os.listdir(part)) == before and not os.path.exists(other)
+
+
+def test_a_failed_continuation_keeps_the_checkpoint(tmp_path):
+    """A continued run whose first step does not converge (exit 3) replaces the directory with its output,
+    which keeps the checkpoint it started from: the run can be continued again."""
+    opts, extra, end, half = SCENES["oedometer"]
+    part = tmp_path / "part"
+    run_scene(opts, part, extra=_steps(extra, 2, half))
+    failing = ["-ksp_type", "cg", "-pc_type", "jacobi", "-ksp_max_it", "1"]
+    proc, s = run_scene(opts, part, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part), *failing],
+                        check=False)
+    assert proc.returncode == 3 and not s["converged"] and s["completed_steps"] == [1, 2]
+    _, s = run_scene(opts, part, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part)])
+    assert s["converged"] and s["completed_steps"] == [1, 2, 3, 4]

@@ -262,12 +262,14 @@ class RunWriter:
     def write_surface_step(self, step, t, point_data, cell_data):
         self.series["surface"].write_step(step, t, point_data, cell_data)
 
-    def copy_steps(self, run_dir, last_step):
-        """Restart: the output steps up to ``last_step`` of the run in ``run_dir`` start this run's series."""
+    def continue_from(self, run_dir, last_step):
+        """Restart: the output steps up to ``last_step`` of the run in ``run_dir`` start this run's series, and
+        its checkpoint is this run's until this run writes one (a first step that fails leaves it)."""
         for name, series in self.series.items():
             old = os.path.join(run_dir, name + ".h5")
             if os.path.exists(old):
                 series.copy_steps(old, last_step)
+        shutil.copyfile(os.path.join(run_dir, "checkpoint.h5"), self.file("checkpoint.h5"))
 
     def write_metadata(self, options, argv):
         lines = ["# resolved options of this run (command: %s)" % " ".join(argv)]
