@@ -165,7 +165,7 @@ class XdmfSeries:
                  '    <Grid Name="TimeSeries" GridType="Collection" CollectionType="Temporal">']
         ptr = 'xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or self::Geometry])'
         for path, t, fields in self.entries:
-            lines.append(f'      <Grid Name="{path}" GridType="Uniform">')
+            lines.append(f'      <Grid Name="step {int(path.rsplit("/", 1)[-1])}" GridType="Uniform">')
             lines.append(f'        <xi:include xpointer="{ptr}"/>')
             lines.append(f'        <Time Value="{t!r}"/>')
             for key, center, ds in fields:
@@ -210,13 +210,14 @@ def _pid_alive(pid):
 
 
 def staging_dir(path):
-    """The hidden sibling a run writes into before its first completed step; stale ones left by killed runs
-    (their process is gone) are removed."""
+    """The hidden sibling ``.<name>.pfault-<host>-<pid>`` a run writes into before its first completed step;
+    stale ones left by killed runs on this host (their process is gone) are removed."""
     parent, base = os.path.split(os.path.abspath(path))
     os.makedirs(parent, exist_ok=True)
-    prefix = f".{base}.pfault-"
+    prefix = f".{base}.pfault-{platform.node()}-"
     for entry in os.listdir(parent):
-        if entry.startswith(prefix) and entry[len(prefix):].isdigit() and not _pid_alive(int(entry[len(prefix):])):
+        pid = entry[len(prefix):]
+        if entry.startswith(prefix) and pid.isdigit() and not _pid_alive(int(pid)):
             shutil.rmtree(os.path.join(parent, entry), ignore_errors=True)
     stage = os.path.join(parent, f"{prefix}{os.getpid()}")
     shutil.rmtree(stage, ignore_errors=True)
