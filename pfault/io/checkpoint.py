@@ -16,7 +16,8 @@ Contents (datasets; attributes on the root)
 - ``fault_state`` (serial fault faces): stick/slip/open at the end of the step
 - ``predictor/...``, attributes ``predictor_t0``, ``predictor_t1``: the state at the
   start of the step, which the augmented slip direction's predictor extrapolates from
-- ``flow/head`` (serial vertices, m) and attributes ``flow_time``, ``flow_history`` (JSON)
+- ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
+  ``flow_time``
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``, ``slip_direction``
 """
@@ -144,7 +145,8 @@ def write(directory, sim, step, t):
     if sim.flow is not None:
         head = distributed.gather_vertex_values(mesh, sim.flow.vertex_head().reshape(-1, 1))
         attrs["flow_time"] = float(sim.flow.time)
-        attrs["flow_history"] = json.dumps(sim.flow.history)
+        # a dataset, not an attribute: a long run's history outgrows HDF5's 64 KiB attribute limit
+        flow_history = np.frombuffer(json.dumps(sim.flow.history).encode(), dtype=np.uint8)
     if comm.rank != 0:
         return
     attrs.update({"format": FORMAT, "step": int(step), "time_s": float(t), "scene": sim.settings.scene,
@@ -166,6 +168,7 @@ def write(directory, sim, step, t):
             h5.create_dataset("fault_state", data=state)
         if head is not None:
             h5.create_dataset("flow/head", data=head[:, 0])
+            h5.create_dataset("flow/history", data=flow_history)
     os.replace(path + TMP_SUFFIX, path)
 
 
@@ -233,7 +236,8 @@ def restore(ckpt, sim):
         elif hasattr(p, "_t_state"):
             p._t_state = float(a["time_s"])
     if sim.flow is not None:
-        sim.flow.restore(ckpt["flow/head"][mesh.vert_serial], a["flow_time"], json.loads(a["flow_history"]))
+        sim.flow.restore(ckpt["flow/head"][mesh.vert_serial], a["flow_time"],
+                         json.loads(bytes(ckpt["flow/history"]).decode()))
 
 
 def load(comm, run_dir, sim):
