@@ -72,7 +72,8 @@ class Case:
     code: int
     message: str
     disk: str = "none"      # none: no output dir | kept: a previous run's files untouched | file: a file
-                            # in the way untouched | partial: a run that stopped, without summary.json
+                            # in the way untouched | partial: a run that stopped in step 3, its summary.json
+                            # and checkpoint.h5 those of step 2
 
 
 def scene(*extra):
@@ -246,7 +247,14 @@ def test_bad_input(tmp_path, case, ranks):
     elif case.disk in ("kept", "file"):
         assert _snapshot(out) == before
     elif case.disk == "partial":
-        assert (out / "fields.h5").exists() and not (out / "summary.json").exists()
+        with open(out / "summary.json") as fh:
+            summary = json.load(fh)
+        assert summary["running"] and summary["completed_steps"] == [1, 2], summary
+        import h5py
+        with h5py.File(out / "fields.h5", "r") as h5:
+            assert sorted(int(k) for k in h5["steps"]) == [0, 1, 2]
+        with h5py.File(out / "checkpoint.h5", "r") as h5:
+            assert h5.attrs["step"] == 2
 
 
 def test_catalogue_size():

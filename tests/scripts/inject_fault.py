@@ -24,7 +24,6 @@ from pfault.io.output import RunWriter  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 solve, write_step = Simulation._solve, RunWriter.write_step
-calls = {"write": 0}
 
 
 def faulty_solve(self, t, t_prev=0.0):
@@ -37,11 +36,10 @@ def faulty_solve(self, t, t_prev=0.0):
     return solve(self, t, t_prev)
 
 
-def faulty_write_step(self, t, point_data, cell_data):
-    calls["write"] += 1
-    if calls["write"] == step + 1:          # call 1 is the initial state
+def faulty_write_step(self, number, t, point_data, cell_data):
+    if number == step:
         raise OSError(errno.ENOSPC, "No space left on device", "fields.h5")
-    return write_step(self, t, point_data, cell_data)
+    return write_step(self, number, t, point_data, cell_data)
 
 
 Simulation._solve = faulty_solve
