@@ -31,6 +31,25 @@ EXIT_MEMORY = 5
 EXIT_INTERNAL = 6
 EXIT_INTERRUPTED = 7
 
+# what each code means, for -help and README.md (pfault.cli has the longer version)
+EXIT_CODES = (
+    (EXIT_OK, "done"),
+    (EXIT_INPUT, "bad input: an option, the scene file or a mesh file"),
+    (EXIT_USAGE, "usage: no scene file, a missing one, stray arguments"),
+    (EXIT_NOT_CONVERGED, "a step did not converge, or the groundwater-flow solve failed"),
+    (EXIT_OUTPUT, "the output cannot be written (not writable, a file in the way, the disk full)"),
+    (EXIT_MEMORY, "out of memory"),
+    (EXIT_INTERNAL, "internal error (a bug; its traceback comes before the line)"),
+    (EXIT_INTERRUPTED, "interrupted: SIGTERM, SIGINT or SIGUSR1 stopped the run after a step "
+                       "(-pfault_restart continues it)"),
+)
+
+
+def exit_code_table():
+    return "\n".join(["Exit codes (the same on every rank; mpirun returns them):"]
+                     + [f"  {code}  {text}" for code, text in EXIT_CODES])
+
+
 PETSC_ERR_MEM = 55           # PETSc's error code for a failed allocation
 SETTLE_SECONDS = 3.0         # how long a failing rank waits for the others before it aborts the job
 

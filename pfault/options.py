@@ -11,7 +11,7 @@ import ctypes
 import difflib
 from dataclasses import dataclass, field
 
-from .errors import InputError, collective_check
+from .errors import InputError, collective_check, exit_code_table
 from .units import parse_list, parse_quantity, parse_table
 
 
@@ -183,6 +183,7 @@ def help_text():
     lines.append("")
     lines.append("Solver options are PETSc's (-snes_*, -ksp_*, -pc_*, -fieldsplit_displacement_*). "
                  "Any option may be set in the scene file or on the command line; the command line wins.")
+    lines += ["", exit_code_table()]
     return "\n".join(lines)
 
 
