@@ -209,8 +209,8 @@ class Simulation:
         head = None
         if self.flow is not None:
             head = distributed.gather_vertex_values(self.mesh, self.flow.vertex_head().reshape(-1, 1))
-        maxima = None
-        if self.comm.rank == 0:
+
+        def write():
             u = pts[:, :3]
             if self.split is not None:
                 u = np.concatenate([u, pts[self.split.split_vertices, 3:]])
@@ -224,7 +224,8 @@ class Simulation:
                                                          "stress": cells[:, 1:10]})
             if faults is not None:
                 self.writer.write_fault_step(step, t, faults)
-            maxima = self._surface_output(step, t, u)
+            return self._surface_output(step, t, u)
+        maxima = run_on_root(self.comm, write)      # a failure to write ends every rank
         return self.comm.tompi4py().bcast(maxima, root=0)
 
     def _surface_output(self, step, t, u):
@@ -475,6 +476,11 @@ class Simulation:
             self.problem.destroy()
         if getattr(self, "flow", None) is not None:
             self.flow.destroy()
+        if hasattr(self, "dofmap"):
+            # destroyed here, on every rank at once: left to the garbage collector, which may free it on some
+            # ranks only (a traceback holding the simulation on another), PETSc 3.18's PetscFinalize waits
+            # for ever in its collective cleanup of such objects
+            self.dofmap.section.destroy()
         if hasattr(self, "mesh"):
             if self.mesh.migration is not None:
                 self.mesh.migration.destroy()
