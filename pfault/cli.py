@@ -24,7 +24,8 @@ import time
 from petsc4py import PETSc
 
 from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_MEMORY, EXIT_NOT_CONVERGED,  # noqa: F401
-                     EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, RunGuard, StepNotConverged, run_on_root)
+                     EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, RunGuard, StepNotConverged, as_pfault_error,
+                     run_on_root)
 
 
 def _flow_failure(exc):
@@ -53,8 +54,13 @@ def main(options_file, argv):
         summary = sim.run()
         run_on_root(comm, sim.write_summary, time.perf_counter() - t0)
     except Exception as exc:  # noqa: BLE001  (every failure ends the run through the guard)
-        code = guard.settle(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
-        _destroy(sim)          # reached only when every rank failed together
+        err = as_pfault_error(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
+        code = guard.settle(err)
+        # reached only when every rank failed together
+        if sim is not None and guard.comm.rank == 0:
+            sim.record_failure(err.line(), code)
+        guard.comm.Barrier()   # no rank ends (mpirun then stops the others) while rank 0 writes
+        _destroy(sim)
         guard.free()
         return code
     _destroy(sim)

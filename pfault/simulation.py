@@ -467,6 +467,17 @@ class Simulation:
                 paths = write_run_figures(self.writer.dir)
                 _print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
 
+    def record_failure(self, line, code):
+        """Rank 0, after every rank failed together: summary.json of a run in place says how it ended (best
+        effort: the failure may be the full disk itself)."""
+        from .errors import EXIT_NOT_CONVERGED
+        if getattr(self, "writer", None) is None:
+            return
+        try:
+            self.writer.write_failure(line, code, not_converged=code == EXIT_NOT_CONVERGED)
+        except (OSError, ValueError):
+            pass
+
     def destroy(self):
         if self.comm.rank == 0 and getattr(self, "writer", None) is not None:
             self.writer.abandon()         # nothing happens to a run directory already in place

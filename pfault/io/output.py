@@ -284,6 +284,20 @@ class RunWriter:
     def write_summary(self, summary):
         replace_json(self.file("summary.json"), summary)
 
+    def write_failure(self, line, code, not_converged=False):
+        """A run that ends with an error after its directory was put in place: its summary.json (that of
+        the last completed step) says so, with ``running`` false, the ``error`` line and the ``exit_code``
+        (``converged`` false when a solve failed). Nothing before the commit: a previous result stays."""
+        if not self.committed:
+            return
+        path = self.file("summary.json")
+        with open(path) as fh:
+            summary = json.load(fh)
+        summary.update(running=False, error=line, exit_code=int(code))
+        if not_converged:
+            summary["converged"] = False
+        replace_json(path, summary)
+
     def commit(self):
         """Put the staged run in place of the output directory (once, after the first completed step).
 
