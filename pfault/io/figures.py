@@ -15,7 +15,7 @@ writes them into any RUN_DIR (an interrupted run's too):
   for groundwater-flow scenes a second panel maps the drawdown in the node layer where it is largest
   (like Figs 4 and 7);
 - ``histories.png``: maximum subsidence, opening, slip (and drawdown) against time from summary.json, with
-  the Newton iterations and active-set updates per step;
+  the Newton iterations and factorisations per step;
 - ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.io.hazard): largest
   horizontal principal strain and angular distortion, with the fault traces and the maxima marked.
 
@@ -477,11 +477,11 @@ def histories_figure(run_dir, out=None):
         ax.grid(alpha=0.3)
     ax = axs[len(panels)]
     newton = col("newton_its")
-    aset = col("active_set_its")
+    fact = col("factorizations")
     width = 0.8 * (t[1] - t[0]) if len(t) > 1 else 0.8
     ax.bar(t, newton, width=width, color="tab:blue", label="Newton iterations")
-    if np.any(aset > 0):
-        ax.plot(t, aset, "s", color="tab:red", label="active-set updates")
+    if np.any(fact > 0):
+        ax.plot(t, fact, "s", color="tab:red", label="factorisations")
     ax.set_title("solver work per step")
     ax.set_xlabel("time (years)")
     ax.set_ylabel("count")
