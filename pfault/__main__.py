@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 from pfault.errors import EXIT_INPUT, EXIT_USAGE
 
-USAGE = "usage: mpirun -n N python -m pfault SCENE.opts [-option value ...]   (python -m pfault -help lists options)"
+USAGE = ("usage: mpirun -n N python -m pfault SCENE.opts [-option value ...]   (python -m pfault -help lists the "
+         "options and exit codes)")
 COMMAND_LINE = "the command line"
 
 

@@ -49,10 +49,14 @@ def probe_output_dir(path):
 
 def output_bytes(n_points, n_cells, n_fault_faces, n_written, flow=False):
     """Rough size of a run's output: the mesh once, then per written step the displacement (and head) at
-    the points, pore-pressure change, stress and material per cell, and ten values per fault face."""
+    the points, pore-pressure change, stress and material per cell, and ten values per fault face; and the
+    checkpoint twice (the last one and the next, written beside it before it replaces it): solution and
+    initial state (6 values per point, 3 per fault face each), initial stress, the faces' initial traction
+    and pore pressure, the head. The land surface's series is small beside the fields'."""
     per_step = 8 * (3 + flow) * n_points + 8 * 11 * n_cells + 8 * 12 * n_fault_faces + 4096
     mesh = 8 * 3 * n_points * (2 if n_fault_faces else 1) + 8 * 4 * n_cells + 8 * 3 * n_fault_faces
-    return mesh + n_written * per_step + 1_000_000
+    checkpoint = 8 * (2 * 6 * n_points + 2 * 3 * n_fault_faces + 9 * n_cells + 4 * n_fault_faces + flow * n_points)
+    return mesh + n_written * per_step + 2 * checkpoint + 1_000_000
 
 
 def _gb(nbytes):

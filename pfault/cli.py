@@ -10,6 +10,8 @@ Exit codes (the same on every rank; mpirun returns them):
        (checked before the first solve against an estimate of the output size, and on every write)
     5  out of memory (a box too large for this machine is found before it is built)
     6  internal error: a bug; the traceback is printed before the line
+    7  interrupted: SIGTERM, SIGINT or SIGUSR1 stopped the run after its current step (summary.json says
+       "interrupted": true; -pfault_restart continues it)
 
 Every error is one line starting with ``pfault: error:`` (``pfault: internal error:`` for a bug), printed
 once. An error on some ranks only ends the whole job within seconds (pfault.errors.RunGuard).
@@ -21,8 +23,9 @@ import time
 
 from petsc4py import PETSc
 
-from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_MEMORY, EXIT_NOT_CONVERGED, EXIT_OK, EXIT_OUTPUT,  # noqa: F401
-                     EXIT_USAGE, RunGuard, StepNotConverged, run_on_root)
+from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_MEMORY, EXIT_NOT_CONVERGED,  # noqa: F401
+                     EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, RunGuard, StepNotConverged, as_pfault_error,
+                     run_on_root)
 
 
 def _flow_failure(exc):
@@ -51,8 +54,13 @@ def main(options_file, argv):
         summary = sim.run()
         run_on_root(comm, sim.write_summary, time.perf_counter() - t0)
     except Exception as exc:  # noqa: BLE001  (every failure ends the run through the guard)
-        code = guard.settle(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
-        _destroy(sim)          # reached only when every rank failed together
+        err = as_pfault_error(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
+        code = guard.settle(err)
+        # reached only when every rank failed together
+        if sim is not None and guard.comm.rank == 0:
+            sim.record_failure(err.line(), code)
+        guard.comm.Barrier()   # no rank ends (mpirun then stops the others) while rank 0 writes
+        _destroy(sim)
         guard.free()
         return code
     _destroy(sim)
@@ -63,4 +71,8 @@ def main(options_file, argv):
     if not summary["converged"]:
         PETSc.Sys.Print("pfault: a step did not converge; see summary.json")
         return EXIT_NOT_CONVERGED
+    if summary.get("interrupted"):
+        PETSc.Sys.Print(f"pfault: interrupted after step {summary['completed_steps'][-1]}; continue it with "
+                        f"-pfault_restart {sim.settings.output_dir}")
+        return EXIT_INTERRUPTED
     return EXIT_OK

@@ -3,8 +3,8 @@
 Exit codes (also in pfault/cli.py and README.md)::
 
     0 done                      3 a step did not converge    6 internal error (a bug)
-    1 bad input                 4 output cannot be written
-    2 usage                     5 out of memory
+    1 bad input                 4 output cannot be written   7 interrupted (stopped after a step on
+    2 usage                     5 out of memory                SIGTERM, SIGINT or SIGUSR1)
 
 Errors that depend only on the options are raised by every rank together. Work done on one rank (the
 serial mesh, output) runs through ``run_on_root``, which shares any exception it raises with every rank.
@@ -29,6 +29,26 @@ EXIT_NOT_CONVERGED = 3
 EXIT_OUTPUT = 4
 EXIT_MEMORY = 5
 EXIT_INTERNAL = 6
+EXIT_INTERRUPTED = 7
+
+# what each code means, for -help and README.md (pfault.cli has the longer version)
+EXIT_CODES = (
+    (EXIT_OK, "done"),
+    (EXIT_INPUT, "bad input: an option, the scene file or a mesh file"),
+    (EXIT_USAGE, "usage: no scene file, a missing one, stray arguments"),
+    (EXIT_NOT_CONVERGED, "a step did not converge, or the groundwater-flow solve failed"),
+    (EXIT_OUTPUT, "the output cannot be written (not writable, a file in the way, the disk full)"),
+    (EXIT_MEMORY, "out of memory"),
+    (EXIT_INTERNAL, "internal error (a bug; its traceback comes before the line)"),
+    (EXIT_INTERRUPTED, "interrupted: SIGTERM, SIGINT or SIGUSR1 stopped the run after a step "
+                       "(-pfault_restart continues it)"),
+)
+
+
+def exit_code_table():
+    return "\n".join(["Exit codes (the same on every rank; mpirun returns them):"]
+                     + [f"  {code}  {text}" for code, text in EXIT_CODES])
+
 
 PETSC_ERR_MEM = 55           # PETSc's error code for a failed allocation
 SETTLE_SECONDS = 3.0         # how long a failing rank waits for the others before it aborts the job

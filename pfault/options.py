@@ -11,7 +11,7 @@ import ctypes
 import difflib
 from dataclasses import dataclass, field
 
-from .errors import InputError, collective_check
+from .errors import InputError, collective_check, exit_code_table
 from .units import parse_list, parse_quantity, parse_table
 
 
@@ -144,6 +144,13 @@ SPECS = [
     _s("pfault_time_max_cuts", "int", 3, "", "a fault step whose Newton solve does not converge is retried as "
        "2, 4, ... equal sub-steps, halving up to this many times (0: no retry); the pore pressure of a flow "
        "model is interpolated linearly in time between its steps"),
+    # output: restart and figures
+    _s("pfault_restart", "string", "", "", "run directory to continue from its last completed step (its "
+       "checkpoint.h5), up to -pfault_time_end; the checkpoint's time must be a point of the time grid "
+       "-pfault_time_end and -pfault_time_steps give; writes into that directory unless -pfault_output_dir "
+       "is given"),
+    _s("pfault_figures", "bool", True, "", "write PNG figures next to the output at the end of the run: fault "
+       "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map"),
 ]
 
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")
@@ -176,6 +183,7 @@ def help_text():
     lines.append("")
     lines.append("Solver options are PETSc's (-snes_*, -ksp_*, -pc_*, -fieldsplit_displacement_*). "
                  "Any option may be set in the scene file or on the command line; the command line wins.")
+    lines += ["", exit_code_table()]
     return "\n".join(lines)
 
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import errno
+import os
 import sys
 import time
 
@@ -12,7 +15,8 @@ from . import checks, fields, scene as scn
 from .assembly.elastic import ElasticAssembler
 from .effects import EffectCosts, logged
 from .effects import decide as decide_effects
-from .errors import InputError, run_on_root
+from .errors import InputError, OutputError, run_on_root
+from .interrupt import StopRequest
 from .mesh import distributed
 from .options import OptionReader, check_unused_petsc_options
 from .solver.problem import Problem, constrained_local
@@ -35,6 +39,11 @@ def _print(*args):
     PETSc.Sys.Print(" ".join(str(a) for a in args))
 
 
+def _check_restart_dir(path):
+    if not os.path.isdir(path):
+        raise InputError(f"-pfault_restart {path}: no such run directory")
+
+
 class Simulation:
     def __init__(self, options_file="", argv=()):
         self.options_file = options_file
@@ -52,6 +61,13 @@ class Simulation:
         stage = PETSc.Log.Stage("Mesh")
         stage.push()
         self.settings = s = scn.read_settings(reader, self.options_file)
+        self.restart_dir = reader.get("pfault_restart")
+        self.figures = reader.get("pfault_figures")
+        if self.restart_dir:
+            run_on_root(comm, _check_restart_dir, self.restart_dir)
+            if not reader.has("pfault_output_dir"):
+                # a restarted run continues in the directory of the run it continues
+                self.settings = s = dataclasses.replace(s, output_dir=self.restart_dir)
         run_on_root(comm, checks.probe_output_dir, s.output_dir)
         from .solver.setup import apply_solver_file
         self.solver_file = apply_solver_file(reader.get("pfault_solver"), self.options_file)
@@ -187,6 +203,8 @@ class Simulation:
         return np.concatenate([pts, pts[sv]]), tets
 
     def _output(self, step, t, u_rel_local, initial=False):
+        """Write one output step (fields, fault, land surface); returns the hazard maxima of the land surface
+        (every rank)."""
         p = self.problem
         both = np.concatenate([u_rel_local[self.dofmap.vertex_dofs(0)], u_rel_local[self.dofmap.vertex_dofs(1)]],
                               axis=1)
@@ -199,7 +217,8 @@ class Simulation:
         head = None
         if self.flow is not None:
             head = distributed.gather_vertex_values(self.mesh, self.flow.vertex_head().reshape(-1, 1))
-        if self.comm.rank == 0:
+
+        def write():
             u = pts[:, :3]
             if self.split is not None:
                 u = np.concatenate([u, pts[self.split.split_vertices, 3:]])
@@ -209,9 +228,65 @@ class Simulation:
                 if self.split is not None:
                     hh = np.concatenate([hh, hh[self.split.split_vertices]])
                 point_data["head_change"] = hh
-            self.writer.write_step(t, point_data, {"pore_pressure_change": cells[:, 0], "stress": cells[:, 1:10]})
+            self.writer.write_step(step, t, point_data, {"pore_pressure_change": cells[:, 0],
+                                                         "stress": cells[:, 1:10]})
             if faults is not None:
-                self.writer.write_fault_step(t, faults)
+                self.writer.write_fault_step(step, t, faults)
+            return self._surface_output(step, t, u)
+        maxima = run_on_root(self.comm, write)      # a failure to write ends every rank
+        return self.comm.tompi4py().bcast(maxima, root=0)
+
+    def _surface_output(self, step, t, u):
+        """Land-surface fields of one output step (rank 0): displacement and the earth-fissure hazard fields;
+        returns their maxima and where they are."""
+        from .io import hazard
+        surf = self.surface
+        if surf is None:
+            return None
+        fields = hazard.surface_fields(surf.points, surf.triangles, u[surf.vertices])
+        self.writer.write_surface_step(step, t, {"displacement": u[surf.vertices]}, fields)
+        return hazard.maxima(surf.points, surf.triangles, fields)
+
+    def _open_output(self):
+        """After the first solve (every solver option has been read by then): reject unused options, then
+        stage the output directory and write the initial state, or on a restart the output steps of the run
+        it continues. Nothing is written before this, and the output directory is replaced only after the
+        first completed step (pfault.io.output.RunWriter.commit)."""
+        if hasattr(self, "writer_ready"):
+            return
+        check_unused_petsc_options(PETSc, self.reader)
+        self.writer_ready = True
+        t0 = time.perf_counter()
+        stage = PETSc.Log.Stage("Output")
+        stage.push()
+        self.writer = run_on_root(self.comm, self._create_writer)
+        if not self.restart_dir:
+            self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
+        stage.pop()
+        self.wall["output"] += time.perf_counter() - t0
+
+    def _create_writer(self):
+        from .io import hazard
+        from .io.output import RunWriter
+        points, tets = self._output_mesh()
+        self.surface = hazard.land_surface(points, tets, self.serial, self.split, self.settings.ground_surface)
+        out = self.settings.output_dir
+        try:
+            writer = RunWriter(out, points, tets, self.serial.cell_material, self.material_names,
+                               fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
+                                                                           self.split.fault_id),
+                               surface_mesh=None if self.surface is None else (self.surface.points,
+                                                                               self.surface.triangles))
+            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            if self.restart_dir:
+                writer.continue_from(self.restart_dir, self.restart_step)
+        except ValueError as exc:       # the series of the run it continues are of another mesh
+            raise InputError(f"-pfault_restart {self.restart_dir}: {exc}") from None
+        except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+                raise                   # a full disk: pfault.errors.as_pfault_error words it
+            raise OutputError(f"-pfault_output_dir {out}: cannot write there ({exc})") from None
+        return writer
 
     def _fault_fields(self, u_total, u_rel):
         """Per fault face (serial order, on every rank): tractions from the total state, jumps relative to the
@@ -238,77 +313,104 @@ class Simulation:
 
     def run(self):
         s = self.settings
-        p = self.problem
         solve_stage = PETSc.Log.Stage("Solve")
         out_stage = PETSc.Log.Stage("Output")
-        steps = []
+        self.surface = None
         times = np.linspace(0.0, s.time_end, s.time_steps + 1)
-        if s.geostatic:
-            solve_stage.push()
-            t0 = time.perf_counter()
-            with logged("pfaultGeostatic"):
-                p.geostatic_prestress(self.snes)
-            p.u.copy(p.u_ref)
-            rec = {"time_s": 0.0, "newton_its": 0, "ksp_its": 0, "wall_s": time.perf_counter() - t0,
-                   "converged": True, "initial": True}
-            if self.fault_settings:
-                rec.update(p.faults.counts_by_state(p.local_array(p.u)))
-            solve_stage.pop()
-            self.wall["solve"] += rec["wall_s"]
-            steps.append(rec)
-            self._progress(0, rec)
+        if self.restart_dir:
+            steps, first, offset = self._restart(times)
+        else:
+            steps, first, offset = self._initial_state(solve_stage), 0, 0
         self.costs.mark_setup()
-        converged = True
-        for step in range(1, s.time_steps + 1):
-            t = times[step]
-            solve_stage.push()
-            rec = self._solve(t, times[step - 1])
-            solve_stage.pop()
-            self._open_output()
-            self.wall["solve"] += rec["wall_s"]
-            sub, hor, u_rel = self._surface_figures()
-            rec["max_subsidence_m"], rec["max_horizontal_displacement_m"] = sub, hor
-            if self.fault_settings:
-                rec["max_fault_opening_m"], rec["max_fault_slip_m"] = self._fault_figures(u_rel)
-            steps.append(rec)
-            self._progress(step, rec)
-            t0 = time.perf_counter()
-            out_stage.push()
-            if step % s.output_every == 0 or step == s.time_steps or not rec["converged"]:
-                self._output(step, t, u_rel)
-            out_stage.pop()
-            self.wall["output"] += time.perf_counter() - t0
-            if not rec["converged"]:
-                converged = False
-                break
-        return self._finish(steps, converged)
+        converged, stop = True, None
+        # after meshing: gmsh resets the SIGINT handler
+        with StopRequest(self.comm) as request:
+            for index in range(first + 1, s.time_steps + 1):
+                step, t = index + offset, times[index]
+                solve_stage.push()
+                rec = self._solve(t, times[index - 1])
+                solve_stage.pop()
+                rec["step"] = step
+                self._open_output()
+                self.wall["solve"] += rec["wall_s"]
+                sub, hor, u_rel = self._surface_figures()
+                rec["max_subsidence_m"], rec["max_horizontal_displacement_m"] = sub, hor
+                if self.fault_settings:
+                    rec["max_fault_opening_m"], rec["max_fault_slip_m"] = self._fault_figures(u_rel)
+                steps.append(rec)
+                self._progress(step, rec)
+                stop = request.agreed()
+                t0 = time.perf_counter()
+                out_stage.push()
+                if (index % s.output_every == 0 or index == s.time_steps or not rec["converged"]
+                        or stop is not None):
+                    hz = self._output(step, t, u_rel)
+                    if hz is not None:
+                        rec.update(hz)
+                self._step_done(steps, rec, step, t)
+                out_stage.pop()
+                self.wall["output"] += time.perf_counter() - t0
+                if not rec["converged"]:
+                    converged = False
+                    break
+                if stop is not None:
+                    _print(f"pfault: stopped after step {step} ({stop})")
+                    break
+        return self._finish(steps, converged, stop)
 
-    def _open_output(self):
-        """After the first solve (every solver option has been read by then): reject unused options, then
-        create the output directory and write the initial state. Nothing is written before this."""
-        if hasattr(self, "writer_ready"):
-            return
-        check_unused_petsc_options(PETSc, self.reader)
-        self.writer_ready = True
+    def _initial_state(self, solve_stage):
+        """The geostatic initial equilibrium (step 0), when the scene asks for one; returns the step records."""
+        p = self.problem
+        if not self.settings.geostatic:
+            return []
+        solve_stage.push()
         t0 = time.perf_counter()
-        stage = PETSc.Log.Stage("Output")
-        stage.push()
+        with logged("pfaultGeostatic"):
+            p.geostatic_prestress(self.snes)
+        p.u.copy(p.u_ref)
+        rec = {"time_s": 0.0, "newton_its": 0, "ksp_its": 0, "wall_s": time.perf_counter() - t0,
+               "converged": True, "initial": True, "step": 0}
+        if self.fault_settings:
+            rec.update(p.faults.counts_by_state(p.local_array(p.u)))
+        solve_stage.pop()
+        self.wall["solve"] += rec["wall_s"]
+        self._progress(0, rec)
+        return [rec]
 
-        def open_writer():
-            from .io.output import RunWriter
-            points, tets = self._output_mesh()
-            writer = RunWriter(self.settings.output_dir, points, tets, self.serial.cell_material,
-                               self.material_names,
-                               fault_mesh=None if self.split is None else (self.serial.points, self.split.faces,
-                                                                           self.split.fault_id))
-            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
-            return writer
-        writer = run_on_root(self.comm, open_writer)   # a failure to write ends every rank
-        if self.comm.rank == 0:
-            self.writer = writer
-        self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
-        stage.pop()
-        self.wall["output"] += time.perf_counter() - t0
+    def _restart(self, times):
+        """State, step records and place on the time grid of the run in -pfault_restart: returns (records,
+        grid index of the checkpoint's time, step number minus grid index)."""
+        from .io import checkpoint
+        from .io.output import read_summary_steps
+        attrs = checkpoint.load(self.comm, self.restart_dir, self)
+        step, t = int(attrs["step"]), float(attrs["time_s"])
+        index = int(np.argmin(np.abs(times - t)))
+        if abs(times[index] - t) > 1e-9 * times[-1]:
+            raise InputError(f"-pfault_restart {self.restart_dir}: its last completed step ends at t = {t:g} s, "
+                             f"which is not a point of the time grid (-pfault_time_end {times[-1]:g} s in "
+                             f"{len(times) - 1} steps); choose -pfault_time_end and -pfault_time_steps so that it is")
+        if index == len(times) - 1:
+            raise InputError(f"-pfault_restart {self.restart_dir}: the run is complete at t = {t:g} s; give a "
+                             "later -pfault_time_end to continue it")
+        steps = run_on_root(self.comm, read_summary_steps, self.restart_dir, step)
+        steps = self.comm.tompi4py().bcast(steps, root=0)
+        self.restart_step = step
+        _print(f"pfault: continuing {self.restart_dir} after step {step} (t = {_fmt_time(t).strip()})")
+        return steps, index, step - index
+
+    def _step_done(self, steps, rec, step, t):
+        """A step is complete: its checkpoint (when it converged) and the summary so far are written, and the
+        first completed step puts the run's directory in place."""
+        from .io import checkpoint
+        state = checkpoint.gather(self) if rec["converged"] else None
+        summary = self._summary(steps, rec["converged"], None, running=True)
+
+        def write():
+            if state is not None:
+                checkpoint.write(self.writer.dir, self, step, t, state)
+            self.writer.write_summary(summary)
+            self.writer.commit()
+        run_on_root(self.comm, write)      # a failure to write ends every rank
 
     def _progress(self, step, rec):
         extra = ""
@@ -325,9 +427,9 @@ class Simulation:
                + f"  wall {rec['wall_s']:7.2f} s{extra}"
                + ("" if rec["converged"] else f"  NOT CONVERGED (reason {rec['reason']})"))
 
-    def _finish(self, steps, converged):
+    def _summary(self, steps, converged, stop, running=False):
         last = [r for r in steps if "max_subsidence_m" in r]
-        self.summary = {
+        summary = {
             "scene": self.settings.scene,
             "ranks": self.comm.size,
             "mesh": {"nodes": int(self.mesh.n_global_vertices), "cells": int(self.mesh.n_global_cells),
@@ -342,24 +444,65 @@ class Simulation:
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
             "converged": bool(converged),
             "effects": self.costs.record(self.effects, len([r for r in steps if not r.get("initial")])),
+            # a run in progress, or one killed before it could say how it ended, reads running: true
+            "running": bool(running),
+            "interrupted": stop is not None,
+            "completed_steps": [r["step"] for r in last if r["converged"]],
         }
+        from .io.hazard import summary_maxima
+        summary.update(summary_maxima(last))
+        if stop is not None:
+            summary["stop_signal"] = stop
+        if self.restart_dir:
+            summary["restart"] = {"from": self.restart_dir, "step": self.restart_step}
+        return summary
+
+    def _finish(self, steps, converged, stop):
+        self.summary = self._summary(steps, converged, stop)
         return self.summary
 
     def write_summary(self, total):
+        """The final summary.json, then the figures. Rank 0 only, under ``run_on_root`` (pfault.cli): the other
+        ranks wait for its verdict, so that none ends (with a non-zero exit code that makes mpirun kill the
+        others) while files are written, and a failure to write ends them all."""
         self.wall["total"] = total
         self.wall["assembly"] = self.problem.assembly_wall
         self.summary["wall_s"] = dict(self.wall)
-        if self.comm.rank == 0 and hasattr(self, "writer"):
-            self.writer.close()
+        if self.comm.rank == 0 and getattr(self, "writer", None) is not None:
             self.writer.write_summary(self.summary)
+            self.writer.commit()
+            self.writer.close()
+            if self.figures and not self.summary["interrupted"]:
+                from .io.figures import write_run_figures
+                t0 = time.perf_counter()
+                paths = write_run_figures(self.writer.dir)
+                _print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
+
+    def record_failure(self, line, code):
+        """Rank 0, after every rank failed together: summary.json of a run in place says how it ended (best
+        effort: the failure may be the full disk itself)."""
+        from .errors import EXIT_NOT_CONVERGED
+        if getattr(self, "writer", None) is None:
+            return
+        try:
+            self.writer.write_failure(line, code, not_converged=code == EXIT_NOT_CONVERGED)
+        except (OSError, ValueError):
+            pass
 
     def destroy(self):
+        if self.comm.rank == 0 and getattr(self, "writer", None) is not None:
+            self.writer.abandon()         # nothing happens to a run directory already in place
         if hasattr(self, "snes"):
             self.snes.destroy()
         if hasattr(self, "problem"):
             self.problem.destroy()
         if getattr(self, "flow", None) is not None:
             self.flow.destroy()
+        if hasattr(self, "dofmap"):
+            # destroyed here, on every rank at once: left to the garbage collector, which may free it on some
+            # ranks only (a traceback holding the simulation on another), PETSc 3.18's PetscFinalize waits
+            # for ever in its collective cleanup of such objects
+            self.dofmap.section.destroy()
         if hasattr(self, "mesh"):
             if self.mesh.migration is not None:
                 self.mesh.migration.destroy()

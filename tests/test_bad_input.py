@@ -72,7 +72,10 @@ class Case:
     code: int
     message: str
     disk: str = "none"      # none: no output dir | kept: a previous run's files untouched | file: a file
-                            # in the way untouched | partial: a run that stopped, without summary.json
+                            # in the way untouched | partial: a run that stopped in step 3, its summary.json
+                            # and checkpoint.h5 those of step 2
+    alone: bool = False     # on 2 ranks, one rank fails alone and aborts the job: summary.json cannot say
+                            # how the run ended (running: true); otherwise it gives the error and the code
 
 
 def scene(*extra):
@@ -194,9 +197,12 @@ CASES = [
     Case("flow_not_converged", scene_file(FLOW_SCENE, "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
          "groundwater flow: KSP flow_ did not converge at t = 43200 s (reason -3)", "kept"),
     # faults on one rank only (rank 1 of 2): the job ends with the line and the code
-    Case("bug_on_one_rank", inject("bug", 1, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial"),
+    Case("bug_on_one_rank", inject("bug", 1, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial",
+         alone=True),
     Case("memory_on_one_rank", inject("memory", 1, 3), 5, "out of memory (injected: unable to allocate 8 GiB",
-         "partial"),
+         "partial", alone=True),
+    Case("flow_failure_after_two_steps", inject("flow", 0, 3), 3, "groundwater flow: injected: KSP flow_ did not "
+         "converge in step 3; the flow solver is set with -flow_ksp_*", "partial"),
     Case("disk_full_during_run", inject("disk_full", 0, 3), 4,
          "cannot write fields.h5: No space left on device; free space on that disk or choose another "
          "-pfault_output_dir", "partial"),
@@ -246,7 +252,19 @@ def test_bad_input(tmp_path, case, ranks):
     elif case.disk in ("kept", "file"):
         assert _snapshot(out) == before
     elif case.disk == "partial":
-        assert (out / "fields.h5").exists() and not (out / "summary.json").exists()
+        with open(out / "summary.json") as fh:
+            summary = json.load(fh)
+        assert summary["completed_steps"] == [1, 2], summary
+        if case.alone and ranks > 1:
+            assert summary["running"] and "error" not in summary, summary
+        else:
+            assert not summary["running"] and summary["exit_code"] == case.code, summary
+            assert summary["error"] == lines[0] and summary["converged"] == (case.code != 3)
+        import h5py
+        with h5py.File(out / "fields.h5", "r") as h5:
+            assert sorted(int(k) for k in h5["steps"]) == [0, 1, 2]
+        with h5py.File(out / "checkpoint.h5", "r") as h5:
+            assert h5.attrs["step"] == 2
 
 
 def test_catalogue_size():

@@ -15,6 +15,15 @@ def test_help_lists_every_option():
     assert "[Pa]" in proc.stdout and "default" in proc.stdout
 
 
+def test_help_lists_the_exit_codes():
+    proc = run(["-m", "pfault", "-help"])
+    from pfault.errors import EXIT_CODES
+    assert [code for code, _ in EXIT_CODES] == list(range(8))
+    for code, text in EXIT_CODES:
+        assert f"  {code}  {text}" in proc.stdout
+    assert "  4  the output cannot be written" in proc.stdout and "  7  interrupted" in proc.stdout
+
+
 def test_no_scene_is_usage_error():
     proc = run(["-m", "pfault"], check=False)
     assert proc.returncode == 2 and "usage" in proc.stderr

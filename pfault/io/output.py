@@ -1,20 +1,36 @@
 """Run output written by rank 0 in the serial (partition-independent) numbering.
 
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
+- ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
 - ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash
 - ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima and wall times
+- ``checkpoint.h5``: the state after the last completed step (pfault.io.checkpoint)
+
+Every completed step is durable: its HDF5 datasets are flushed, then the XDMF files and summary.json are
+rewritten whole into a temporary file that replaces the old one (os.replace), so a reader never sees a
+half-written file, whenever the run stops. A new run writes into a hidden sibling directory and takes the
+place of the output directory after its first completed step (``commit``): until then a previous result
+there stays intact; after it the directory holds only the new run's files (plus files pfault does not
+write, which are carried over).
 """
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
-import pathlib
 import platform
+import shutil
 import subprocess
-import sys
 
 import numpy as np
+
+# names pfault writes into a run directory: replaced by a new run; anything else there is carried over
+SERIES = ("fields", "fault", "surface")
+RUN_FILES = frozenset([f"{s}.{e}" for s in SERIES for e in ("xdmf", "h5")]
+                      + ["summary.json", "options.txt", "versions.json", "materials.json", "checkpoint.h5",
+                         "fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"])
+TMP_SUFFIX = ".tmp"
 
 
 def package_versions():
@@ -48,79 +64,287 @@ def git_hash():
     return out.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
 
 
-class RunWriter:
-    """Writes a run's directory; every method is called on rank 0 only."""
+def replace_text(path, text):
+    """Write a text file whole: into a temporary sibling, then os.replace (atomic on POSIX)."""
+    tmp = path + TMP_SUFFIX
+    with open(tmp, "w") as fh:
+        fh.write(text)
+    os.replace(tmp, path)
 
-    def __init__(self, path, points, cells, cell_material, material_names, fault_mesh=None):
-        os.makedirs(path, exist_ok=True)
-        self.path = path
-        import meshio
-        self._meshio = meshio
-        for name in ("fields.xdmf", "fields.h5", "fault.xdmf", "fault.h5"):
-            if os.path.exists(os.path.join(path, name)):
-                os.remove(os.path.join(path, name))
-        # meshio opens the .h5 beside the current directory, not beside the .xdmf: open it from there
-        self._writer = meshio.xdmf.TimeSeriesWriter("fields.xdmf")
-        cwd = os.getcwd()
-        os.chdir(path)
-        try:
-            self._writer.__enter__()
-        finally:
-            os.chdir(cwd)
-        self._writer.filename = pathlib.Path(os.path.abspath(os.path.join(path, "fields.xdmf")))
-        self._writer.write_points_cells(points, [("tetra", np.asarray(cells, dtype=np.int64))])
-        self.cell_material = np.asarray(cell_material, dtype=np.int64)
-        self.material_names = material_names
-        self._fault = None
-        if fault_mesh is not None:
-            self._fault = self._open("fault.xdmf")
-            fpoints, ffaces, fid = fault_mesh
-            self._fault.write_points_cells(fpoints, [("triangle", np.asarray(ffaces, dtype=np.int64))])
-            self.fault_id = np.asarray(fid, dtype=np.int64)
 
-    def _open(self, name):
-        import meshio
-        w = meshio.xdmf.TimeSeriesWriter(name)
-        cwd = os.getcwd()
-        os.chdir(self.path)
-        try:
-            w.__enter__()
-        finally:
-            os.chdir(cwd)
-        w.filename = pathlib.Path(os.path.abspath(os.path.join(self.path, name)))
-        return w
+def replace_json(path, data):
+    replace_text(path, json.dumps(data, indent=2) + "\n")
 
-    def write_fault_step(self, t, data):
-        cd = {"fault": [self.fault_id]}
-        cd.update({k: [np.asarray(v)] for k, v in data.items()})
-        self._fault.write_data(t, cell_data=cd)
 
-    def write_step(self, t, point_data, cell_data):
-        cd = {"material": [self.cell_material]}
-        cd.update({k: [np.asarray(v)] for k, v in cell_data.items()})
-        self._writer.write_data(t, point_data=point_data, cell_data=cd)
+def open_h5(path, mode):
+    """h5py File without HDF5's file lock, so that a viewer may read what has been flushed while a run
+    writes (HDF5 >= 1.10.7; older versions lock)."""
+    import h5py
+    try:
+        return h5py.File(path, mode, locking=False)
+    except (TypeError, ValueError):
+        return h5py.File(path, mode)
+
+
+# ------------------------------------------------------------------------------------------------------
+# XDMF time series
+# ------------------------------------------------------------------------------------------------------
+_TOPOLOGY = {4: "Tetrahedron", 3: "Triangle"}
+
+
+def _data_item(h5name, path, arr):
+    arr = np.asarray(arr)
+    kind = "Int" if np.issubdtype(arr.dtype, np.integer) else "Float"
+    dims = " ".join(str(d) for d in arr.shape)
+    return (f'<DataItem DataType="{kind}" Dimensions="{dims}" Format="HDF" Precision="{arr.dtype.itemsize}">'
+            f"{h5name}:{path}</DataItem>")
+
+
+def _attribute_type(arr):
+    if arr.ndim == 1:
+        return "Scalar"
+    return {3: "Vector", 9: "Tensor"}.get(arr.shape[1], "Matrix")
+
+
+class XdmfSeries:
+    """One time series: ``NAME.h5`` holds the mesh (``/mesh``) and one group per written step
+    (``/steps/NNNNNN``, attributes ``step`` and ``time``; datasets with attribute ``center`` Node or Cell);
+    ``NAME.xdmf`` lists the steps written so far in the layout of meshio's TimeSeriesWriter (readable by
+    meshio.xdmf.TimeSeriesReader and ParaView). Rank 0 only."""
+
+    def __init__(self, directory, name, points, cells):
+        self.directory, self.name = directory, name
+        self.h5name = name + ".h5"
+        self.h5 = open_h5(os.path.join(directory, self.h5name), "w")
+        mesh = self.h5.create_group("mesh")
+        mesh.create_dataset("points", data=np.asarray(points, dtype=np.float64))
+        mesh.create_dataset("cells", data=np.asarray(cells, dtype=np.int64))
+        self.n_points, self.n_cells = len(points), len(cells)
+        self.entries = []                 # (group path, time, [(name, center, array shape/dtype)])
+        self.h5.flush()
+        self._write_xdmf()
+
+    def write_step(self, step, t, point_data=None, cell_data=None):
+        grp = self.h5.create_group(f"steps/{int(step):06d}")
+        grp.attrs["step"], grp.attrs["time"] = int(step), float(t)
+        for center, data in (("Node", point_data or {}), ("Cell", cell_data or {})):
+            for key, value in data.items():
+                ds = grp.create_dataset(key, data=np.asarray(value))
+                ds.attrs["center"] = center
+        self.h5.flush()
+        self._add_entry(grp)
+        self._write_xdmf()
+
+    def _add_entry(self, grp):
+        fields = [(k, ds.attrs["center"], ds) for k, ds in grp.items()]
+        self.entries.append((grp.name, float(grp.attrs["time"]), fields))
+
+    def copy_steps(self, h5_path, last_step):
+        """Copy the steps up to ``last_step`` of another run's series (same mesh) into this one (restart)."""
+        with open_h5(h5_path, "r") as old:
+            if old["mesh/points"].shape != (self.n_points, 3) or len(old["mesh/cells"]) != self.n_cells:
+                raise ValueError(f"{h5_path}: the mesh differs from this run's")
+            for key in sorted(old.get("steps", {})):
+                if int(old["steps"][key].attrs["step"]) <= last_step:
+                    old.copy(old["steps"][key], self.h5.require_group("steps"), name=key)
+                    self._add_entry(self.h5["steps"][key])
+        self.h5.flush()
+        self._write_xdmf()
+
+    def _write_xdmf(self):
+        h5 = self.h5name
+        mesh = self.h5["mesh"]
+        npe = mesh["cells"].shape[1]
+        lines = ['<?xml version="1.0"?>',
+                 '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">', "  <Domain>",
+                 '    <Grid Name="mesh" GridType="Uniform">',
+                 f'      <Geometry GeometryType="XYZ">{_data_item(h5, "/mesh/points", mesh["points"])}</Geometry>',
+                 f'      <Topology TopologyType="{_TOPOLOGY[npe]}" NumberOfElements="{self.n_cells}">'
+                 f'{_data_item(h5, "/mesh/cells", mesh["cells"])}</Topology>',
+                 "    </Grid>",
+                 '    <Grid Name="TimeSeries" GridType="Collection" CollectionType="Temporal">']
+        ptr = 'xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or self::Geometry])'
+        for path, t, fields in self.entries:
+            lines.append(f'      <Grid Name="step {int(path.rsplit("/", 1)[-1])}" GridType="Uniform">')
+            lines.append(f'        <xi:include xpointer="{ptr}"/>')
+            lines.append(f'        <Time Value="{t!r}"/>')
+            for key, center, ds in fields:
+                lines.append(f'        <Attribute Name="{key}" AttributeType="{_attribute_type(ds)}" '
+                             f'Center="{center}">{_data_item(h5, f"{path}/{key}", ds)}</Attribute>')
+            lines.append("      </Grid>")
+        lines += ["    </Grid>", "  </Domain>", "</Xdmf>", ""]
+        replace_text(os.path.join(self.directory, self.name + ".xdmf"), "\n".join(lines))
+
+    def moved(self, directory):
+        """The run directory was renamed (the open HDF5 file moves with it)."""
+        self.directory = directory
 
     def close(self):
-        if self._writer is not None:
-            self._writer.__exit__(None, None, None)
-            self._writer = None
-        if self._fault is not None:
-            self._fault.__exit__(None, None, None)
-            self._fault = None
+        if self.h5 is not None:
+            self.h5.close()
+            self.h5 = None
+
+
+# ------------------------------------------------------------------------------------------------------
+# the run directory
+# ------------------------------------------------------------------------------------------------------
+def _exchange(a, b):
+    """Swap two directories atomically (Linux renameat2 RENAME_EXCHANGE); False where not supported."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
+
+
+def _pid_alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def staging_dir(path):
+    """The hidden sibling ``.<name>.pfault-<host>-<pid>`` a run writes into before its first completed step;
+    stale ones left by killed runs on this host (their process is gone) are removed."""
+    parent, base = os.path.split(os.path.abspath(path))
+    os.makedirs(parent, exist_ok=True)
+    prefix = f".{base}.pfault-{platform.node()}-"
+    for entry in os.listdir(parent):
+        pid = entry[len(prefix):]
+        if entry.startswith(prefix) and pid.isdigit() and not _pid_alive(int(pid)):
+            shutil.rmtree(os.path.join(parent, entry), ignore_errors=True)
+    stage = os.path.join(parent, f"{prefix}{os.getpid()}")
+    shutil.rmtree(stage, ignore_errors=True)
+    os.makedirs(stage)
+    return stage
+
+
+class RunWriter:
+    """Writes a run's directory; every method is called on rank 0 only.
+
+    ``path`` is the output directory; the files go to a staging sibling until ``commit`` puts them in place
+    (``self.dir`` is where they are now)."""
+
+    def __init__(self, path, points, cells, cell_material, material_names, fault_mesh=None, surface_mesh=None):
+        self.path = os.path.realpath(path)     # a symbolic link to a directory: the run goes where it points
+        if os.path.exists(self.path) and not os.path.isdir(self.path):
+            raise FileExistsError(f"{path} exists and is not a directory")
+        self.dir = staging_dir(self.path)
+        self.committed = False
+        self.cell_material = np.asarray(cell_material, dtype=np.int64)
+        self.material_names = material_names
+        self.series = {"fields": XdmfSeries(self.dir, "fields", points, cells)}
+        if fault_mesh is not None:
+            fpoints, ffaces, fid = fault_mesh
+            self.series["fault"] = XdmfSeries(self.dir, "fault", fpoints, ffaces)
+            self.fault_id = np.asarray(fid, dtype=np.int64)
+        if surface_mesh is not None:
+            self.series["surface"] = XdmfSeries(self.dir, "surface", *surface_mesh)
+
+    def file(self, name):
+        return os.path.join(self.dir, name)
+
+    def write_step(self, step, t, point_data, cell_data):
+        cd = {"material": self.cell_material}
+        cd.update(cell_data)
+        self.series["fields"].write_step(step, t, point_data, cd)
+
+    def write_fault_step(self, step, t, data):
+        cd = {"fault": self.fault_id}
+        cd.update(data)
+        self.series["fault"].write_step(step, t, None, cd)
+
+    def write_surface_step(self, step, t, point_data, cell_data):
+        self.series["surface"].write_step(step, t, point_data, cell_data)
+
+    def continue_from(self, run_dir, last_step):
+        """Restart: the output steps up to ``last_step`` of the run in ``run_dir`` start this run's series, and
+        its checkpoint is this run's until this run writes one (a first step that fails leaves it)."""
+        for name, series in self.series.items():
+            old = os.path.join(run_dir, name + ".h5")
+            if os.path.exists(old):
+                series.copy_steps(old, last_step)
+        shutil.copyfile(os.path.join(run_dir, "checkpoint.h5"), self.file("checkpoint.h5"))
 
     def write_metadata(self, options, argv):
-        with open(os.path.join(self.path, "options.txt"), "w") as fh:
-            fh.write("# resolved options of this run (command: %s)\n" % " ".join(argv))
-            for k in sorted(options):
-                v = options[k]
-                fh.write(f"-{k} {v}\n" if v not in (None, "") else f"-{k}\n")
-        with open(os.path.join(self.path, "versions.json"), "w") as fh:
-            json.dump(package_versions(), fh, indent=2)
-        with open(os.path.join(self.path, "materials.json"), "w") as fh:
-            json.dump({i: n for i, n in enumerate(self.material_names)}, fh, indent=2)
+        lines = ["# resolved options of this run (command: %s)" % " ".join(argv)]
+        for k in sorted(options):
+            v = options[k]
+            lines.append(f"-{k} {v}" if v not in (None, "") else f"-{k}")
+        replace_text(self.file("options.txt"), "\n".join(lines) + "\n")
+        replace_json(self.file("versions.json"), package_versions())
+        replace_json(self.file("materials.json"), {i: n for i, n in enumerate(self.material_names)})
 
     def write_summary(self, summary):
-        tmp = os.path.join(self.path, "summary.json.tmp")
-        with open(tmp, "w") as fh:
-            json.dump(summary, fh, indent=2)
-        os.replace(tmp, os.path.join(self.path, "summary.json"))
+        replace_json(self.file("summary.json"), summary)
+
+    def write_failure(self, line, code, not_converged=False):
+        """A run that ends with an error after its directory was put in place: its summary.json (that of
+        the last completed step) says so, with ``running`` false, the ``error`` line and the ``exit_code``
+        (``converged`` false when a solve failed). Nothing before the commit: a previous result stays."""
+        if not self.committed:
+            return
+        path = self.file("summary.json")
+        with open(path) as fh:
+            summary = json.load(fh)
+        summary.update(running=False, error=line, exit_code=int(code))
+        if not_converged:
+            summary["converged"] = False
+        replace_json(path, summary)
+
+    def commit(self):
+        """Put the staged run in place of the output directory (once, after the first completed step).
+
+        Files of the old directory that pfault does not write (logs of a driver, notes) are moved into the
+        new one first (an open file keeps being written where it moved); then the two directories are swapped
+        atomically where the kernel can (renameat2), else by two renames; the old run's files are deleted."""
+        if self.committed:
+            return
+        path = self.path
+        if os.path.isdir(path):
+            for entry in os.listdir(path):
+                if entry not in RUN_FILES and not entry.endswith(TMP_SUFFIX) and \
+                        not os.path.exists(os.path.join(self.dir, entry)):
+                    os.rename(os.path.join(path, entry), os.path.join(self.dir, entry))
+            if _exchange(self.dir, path):
+                old = self.dir
+            else:
+                old = self.dir + ".old"
+                os.rename(path, old)
+                os.rename(self.dir, path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.rename(self.dir, path)
+        self.dir = path
+        for series in self.series.values():
+            series.moved(path)
+        self.committed = True
+
+    def close(self):
+        for series in self.series.values():
+            series.close()
+
+    def abandon(self):
+        """A run that ends before its first completed step: remove what it staged; the output directory
+        (a previous result) is left as it was."""
+        self.close()
+        if not self.committed:
+            shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def read_summary_steps(run_dir, last_step):
+    """The step records of a run's summary.json up to step ``last_step`` (restart; rank 0)."""
+    from ..errors import InputError
+    path = os.path.join(run_dir, "summary.json")
+    try:
+        with open(path) as fh:
+            steps = json.load(fh)["steps"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(f"-pfault_restart {run_dir}: summary.json is not readable ({exc})") from None
+    return [r for r in steps if r.get("step", -1) <= last_step and "step" in r]

@@ -364,6 +364,17 @@ class GroundwaterFlow:
         """Head change h (m) at the local vertices (owned and ghost), at the current time."""
         return self.h_local.copy()
 
+    def restore(self, h_local, time, history=()):
+        """Continue from a saved state (restart): head change h per local vertex (m, owned and ghost), the
+        model time (s) and its step records."""
+        self.h_local = np.array(h_local, dtype=float, copy=True)
+        lv = self.dm.getLocalVec()
+        lv.setArray(self.h_local)
+        self.dm.localToGlobal(lv, self.h, addv=PETSc.InsertMode.INSERT_VALUES)
+        self.dm.restoreLocalVec(lv)
+        self.time = float(time)
+        self.history = [dict(r) for r in history]
+
     def cell_values(self, t, cell_material=None, centroids=None):
         """Pore-pressure change dp = rho_w g h (Pa) per local cell at time t (advancing to t if needed);
         h is the cell average of the P1 head. Same interface as MaterialDrawdown.cell_values."""

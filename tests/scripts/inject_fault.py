@@ -3,7 +3,9 @@
     mpirun -n 2 python tests/scripts/inject_fault.py KIND RANK STEP SCENE.opts [-option value ...]
 
 KIND: ``bug`` (a RuntimeError) or ``memory`` (a MemoryError), raised in time step STEP on rank RANK only;
-``disk_full`` (OSError ENOSPC) when rank 0 writes the fields of time step STEP. Exits with pfault's exit code.
+``flow`` (the flow solver's FlowNotConverged) raised in time step STEP on every rank (RANK is ignored), as
+the flow KSP's collective verdict is; ``disk_full`` (OSError ENOSPC) when rank 0 writes the fields of time
+step STEP. Exits with pfault's exit code.
 """
 
 import errno
@@ -22,9 +24,9 @@ from petsc4py import PETSc  # noqa: E402
 from pfault import cli  # noqa: E402
 from pfault.io.output import RunWriter  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
+from pfault.solver.flow import FlowNotConverged  # noqa: E402
 
 solve, write_step = Simulation._solve, RunWriter.write_step
-calls = {"write": 0}
 
 
 def faulty_solve(self, t, t_prev=0.0):
@@ -34,14 +36,15 @@ def faulty_solve(self, t, t_prev=0.0):
         raise RuntimeError(f"injected fault in step {step}")
     if here and kind == "memory":
         raise MemoryError(f"injected: unable to allocate 8 GiB in step {step}")
+    if kind == "flow" and abs(t - self.settings.time_end * step / self.settings.time_steps) < 1e-9 * t:
+        raise FlowNotConverged(f"groundwater flow: injected: KSP flow_ did not converge in step {step}")
     return solve(self, t, t_prev)
 
 
-def faulty_write_step(self, t, point_data, cell_data):
-    calls["write"] += 1
-    if calls["write"] == step + 1:          # call 1 is the initial state
+def faulty_write_step(self, number, t, point_data, cell_data):
+    if number == step:
         raise OSError(errno.ENOSPC, "No space left on device", "fields.h5")
-    return write_step(self, t, point_data, cell_data)
+    return write_step(self, number, t, point_data, cell_data)
 
 
 Simulation._solve = faulty_solve

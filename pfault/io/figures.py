@@ -1,0 +1,586 @@
+"""PNG figures of a run directory (matplotlib, Agg backend), on rank 0 from the files pfault.io.output wrote.
+
+A run writes them at its end (``-pfault_figures``, default true; pfault.simulation), and
+
+    python -m pfault.study.figures RUN_DIR [RUN_DIR ...] [--step K]
+
+writes them into any RUN_DIR (an interrupted run's too):
+
+- ``fault_opening_slip.png`` (faults only): opening and slip magnitude over the fault plane, one colour per
+  fault triangle, in fault-plane coordinates ((y, z) for a vertical fault x = const; the vertical axis is
+  stretched), and along-strike profiles of the largest opening and slip and of the mean dip slip (like
+  Figs 3 and 6 of Franceschini et al., Proc. IAHS 372, 2015);
+- ``subsidence_map.png``: land subsidence -u_z on the top surface (filled contours on the surface
+  triangles of the mesh, so the jump across a fault trace is kept), with the fault trace and the wells;
+  for groundwater-flow scenes a second panel maps the drawdown in the node layer where it is largest
+  (like Figs 4 and 7);
+- ``histories.png``: maximum subsidence, opening, slip (and drawdown) against time from summary.json, with
+  the Newton iterations and factorisations per step;
+- ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.io.hazard): largest
+  horizontal principal strain and angular distortion, with the fault traces and the maxima marked.
+
+Each PNG is written whole into ``NAME.png.tmp`` and renamed over the old one.
+
+``K`` is the index of the output time (default -1: the last one). The readers below (``read_summary``,
+``read_fields``, ``read_fault``, ``top_surface``, ...) are also used by pfault.study.casestudies and the
+tests; they read the files pfault.io.output writes and need meshio only.
+
+Sign conventions (pfault.mesh.fault): a fault triangle's vertex order gives the normal (x1-x0)x(x2-x0) from
+the minus to the plus side; jumps are plus minus minus; opening is the normal jump (positive: open); the
+dip slip is the slip component along the up-dip direction of the plane (positive: the plus side moves up
+relative to the minus side).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+YEAR = 365.25 * 86400.0
+TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+FIGURES = ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png")
+
+
+# ------------------------------------------------------------------------------------------------------
+# reading a run directory
+# ------------------------------------------------------------------------------------------------------
+@dataclass
+class Snapshot:
+    """One output time of fields.xdmf (tetrahedra) or fault.xdmf (triangles)."""
+    points: np.ndarray
+    cells: np.ndarray
+    time: float
+    point_data: dict = field(default_factory=dict)
+    cell_data: dict = field(default_factory=dict)
+    num_steps: int = 0
+
+
+def read_summary(run_dir):
+    with open(os.path.join(run_dir, "summary.json")) as fh:
+        return json.load(fh)
+
+
+def read_options(run_dir):
+    """The resolved options of a run (options.txt) as {name without '-': value string ('' for flags)}."""
+    out = {}
+    path = os.path.join(run_dir, "options.txt")
+    if not os.path.exists(path):
+        return out
+    with open(path) as fh:
+        for line in fh:
+            line = line.strip()
+            if not line.startswith("-"):
+                continue
+            key, _, value = line[1:].partition(" ")
+            out[key] = value.strip()
+    return out
+
+
+def read_materials(run_dir):
+    """{material id: name} from materials.json."""
+    with open(os.path.join(run_dir, "materials.json")) as fh:
+        return {int(k): v for k, v in json.load(fh).items()}
+
+
+def _read_series(path, step, cell_type):
+    import meshio
+    with meshio.xdmf.TimeSeriesReader(path) as reader:
+        points, blocks = reader.read_points_cells()
+        n = reader.num_steps
+        if not -n <= step < n:
+            raise IndexError(f"{path}: output time {step} out of range ({n} times written)")
+        t, point_data, cell_data = reader.read_data(step % n)
+    cells = np.concatenate([b.data for b in blocks if b.type == cell_type])
+    cell_data = {k: np.concatenate(v) for k, v in cell_data.items()}
+    return Snapshot(np.asarray(points), np.asarray(cells, dtype=np.int64), float(t),
+                    {k: np.asarray(v) for k, v in point_data.items()}, cell_data, n)
+
+
+def read_fields(run_dir, step=-1):
+    """Mesh (split fault vertices appear twice; plus-side cells use the copies) and fields at one time:
+    point data ``displacement`` (m, relative to the initial state), ``head_change`` (m, flow scenes); cell data
+    ``material``, ``pore_pressure_change`` (Pa), ``stress`` (Pa)."""
+    return _read_series(os.path.join(run_dir, "fields.xdmf"), step, "tetra")
+
+
+def read_fault(run_dir, step=-1):
+    """Fault triangles (on the serial points, i.e. the minus-side vertices) and per-face fields at one time:
+    ``opening`` (m), ``slip`` (m, 3 components), ``slip_magnitude`` (m), ``traction_normal`` (Pa),
+    ``traction_shear`` (Pa), ``state`` (stick/slip/open code), ``fault`` (fault index)."""
+    return _read_series(os.path.join(run_dir, "fault.xdmf"), step, "triangle")
+
+
+def has_fault(run_dir):
+    return os.path.exists(os.path.join(run_dir, "fault.xdmf"))
+
+
+def top_surface(points, tets, rtol=1e-9):
+    """Triangles (k, 3) of the mesh faces lying on the plane z = max z (the land surface)."""
+    z = points[:, 2]
+    ztop = z.max()
+    on = np.abs(z - ztop) <= rtol * max(np.ptp(points, axis=0).max(), 1.0)
+    faces = tets[:, TET_FACES].reshape(-1, 3)
+    return faces[on[faces].all(axis=1)]
+
+
+def face_geometry(points, tris):
+    """Unit normals (minus -> plus), areas and centroids of triangles."""
+    x = points[tris]
+    cross = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    area2 = np.linalg.norm(cross, axis=1)
+    return cross / np.maximum(area2, 1e-300)[:, None], 0.5 * area2, x.mean(axis=1)
+
+
+def plane_axes(normals):
+    """Axis index normal to a (near) coordinate-plane fault and the two in-plane axes, e.g. (0, (1, 2)) for
+    a vertical fault x = const: plot it in (y, z)."""
+    a = int(np.argmax(np.abs(normals).mean(axis=0)))
+    return a, tuple(i for i in range(3) if i != a)
+
+
+def dip_slip(slip, normals):
+    """Slip component along the up-dip direction of each face (positive: plus side up relative to minus);
+    for a vertical fault this is the vertical slip u_z(plus) - u_z(minus)."""
+    ez = np.array([0.0, 0.0, 1.0])
+    d = ez[None, :] - normals[:, 2:3] * normals
+    nd = np.linalg.norm(d, axis=1)
+    d = np.where(nd[:, None] > 1e-12, d / np.maximum(nd, 1e-300)[:, None], 0.0)
+    return np.einsum("ij,ij->i", slip, d)
+
+
+def nodal_jumps(fields, fault):
+    """Displacement jumps at the split fault vertices (plus copy minus original), from fields.xdmf.
+
+    fields.xdmf holds the serial vertices followed by one copy per split vertex (used by the plus-side
+    cells); fault.xdmf holds the serial vertices only, so copies are matched to their originals by their
+    (bitwise equal) coordinates among the fault vertices. Returns (points (k, 3), jump (k, 3), normal (k, 3)),
+    with the normal averaged over the fault faces at each vertex; tips (unsplit) are left out."""
+    n_serial = len(fault.points)
+    P = fields.points
+    copies = np.arange(n_serial, len(P))
+    cand = np.unique(fault.cells)
+    keys = np.concatenate([P[cand], P[copies]])
+    _, inv = np.unique(keys, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    first = np.full(inv.max() + 1, -1)
+    first[inv[: len(cand)]] = cand
+    orig = first[inv[len(cand):]]
+    ok = orig >= 0
+    copies, orig = copies[ok], orig[ok]
+    u = fields.point_data["displacement"]
+    normals, area, _ = face_geometry(fault.points, fault.cells)
+    vn = np.zeros((n_serial, 3))
+    for k in range(3):
+        np.add.at(vn, fault.cells[:, k], normals * area[:, None])
+    vn = vn[orig]
+    vn /= np.maximum(np.linalg.norm(vn, axis=1), 1e-300)[:, None]
+    return P[orig], u[copies] - u[orig], vn
+
+
+def surface_fault_jumps(fields, fault, rtol=1e-9):
+    """Largest nodal opening and slip magnitude (m) of the split fault vertices on the land surface z = max z
+    (the width and offset one would measure across a fissure or scarp in the field)."""
+    p, jump, n = nodal_jumps(fields, fault)
+    ztop = fields.points[:, 2].max()
+    top = np.abs(p[:, 2] - ztop) <= rtol * max(np.ptp(fields.points, axis=0).max(), 1.0)
+    if not np.any(top):
+        return 0.0, 0.0
+    jn = np.einsum("ij,ij->i", jump, n)
+    slip = np.linalg.norm(jump - jn[:, None] * n, axis=1)
+    return float(np.max(jn[top], initial=0.0)), float(np.max(slip[top], initial=0.0))
+
+
+def wells_from_options(options):
+    """Well (x, y) pairs of a flow scene from its resolved options, or an empty (0, 2) array."""
+    raw = options.get("pfault_flow_wells", "")
+    try:
+        vals = [float(v) for v in raw.split(",") if v.strip()]
+    except ValueError:
+        vals = []
+    return np.array(vals[: len(vals) // 2 * 2]).reshape(-1, 2)
+
+
+# ------------------------------------------------------------------------------------------------------
+# figures
+# ------------------------------------------------------------------------------------------------------
+def _pyplot():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, out):
+    """Write a figure whole (temporary file, then os.replace) and close it; returns the path."""
+    import matplotlib.pyplot as plt
+    fig.savefig(out + ".tmp", dpi=110, format="png")
+    plt.close(fig)
+    os.replace(out + ".tmp", out)
+    return out
+
+
+def _title_time(t):
+    return f"t = {t / YEAR:.3g} years"
+
+
+def _scene(run_dir):
+    try:
+        return read_summary(run_dir).get("scene", os.path.basename(os.path.abspath(run_dir)))
+    except (OSError, ValueError):
+        return os.path.basename(os.path.abspath(run_dir))
+
+
+def _binned(s, values, nbins, how):
+    """Per-bin reduction ('max' or 'mean') of values over the along-strike coordinate s; NaN in empty bins."""
+    edges = np.linspace(s.min(), s.max(), nbins + 1)
+    b = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, nbins - 1)
+    count = np.bincount(b, minlength=nbins)
+    if how == "mean":
+        out = np.bincount(b, weights=values, minlength=nbins) / np.maximum(count, 1)
+    else:
+        out = np.full(nbins, -np.inf)
+        np.maximum.at(out, b, values)
+    out[count == 0] = np.nan
+    return 0.5 * (edges[1:] + edges[:-1]), out
+
+
+def fault_figure(run_dir, out=None, step=-1):
+    """Opening and slip over the fault plane(s) at one output time; returns the PNG path."""
+    plt = _pyplot()
+    from matplotlib.tri import Triangulation
+    snap = read_fault(run_dir, step)
+    pts, tris, cd = snap.points, snap.cells, snap.cell_data
+    normals, _, centroids = face_geometry(pts, tris)
+    axis, (ia, ib) = plane_axes(normals)
+    names = "xyz"
+    opening_cm = 100.0 * cd["opening"]
+    slip_cm = 100.0 * cd["slip_magnitude"]
+    dip_cm = 100.0 * dip_slip(cd["slip"], normals)
+    tri = Triangulation(pts[:, ia], pts[:, ib], tris)
+    scene = _scene(run_dir)
+    plane = float(np.median(centroids[:, axis]))
+
+    fig, axs = plt.subplots(3, 1, figsize=(11, 9.5), constrained_layout=True,
+                            gridspec_kw={"height_ratios": [1, 1, 1.1]})
+    panels = ((opening_cm, "viridis", "opening (cm)", "fault opening (normal jump, positive: open)"),
+              (slip_cm, "magma", "slip (cm)", "fault slip magnitude (tangential jump)"))
+    for ax, (val, cmap, label, what) in zip(axs[:2], panels):
+        vmax = max(float(np.max(val, initial=0.0)), 1e-6)
+        pc = ax.tripcolor(tri, facecolors=val, cmap=cmap, vmin=0.0, vmax=vmax, edgecolors="none")
+        cb = fig.colorbar(pc, ax=ax, pad=0.01)
+        cb.set_label(label)
+        ax.set_title(f"{scene}: {what}, max {vmax:.3g} cm, {_title_time(snap.time)}")
+        ax.set_xlabel(f"{names[ia]} (m), along the fault plane {names[axis]} = {plane:g} m")
+        ax.set_ylabel(f"{names[ib]} (m, stretched)")
+        ax.set_xlim(pts[tris, ia].min(), pts[tris, ia].max())
+        ax.set_ylim(pts[tris, ib].min(), pts[tris, ib].max())
+    # along-strike profiles: largest opening and slip over the depth, mean dip slip
+    s = centroids[:, ia]
+    nbins = int(np.clip(len(tris) // 8, 20, 300))
+    ax = axs[2]
+    for val, how, style, label in ((opening_cm, "max", "-", "max opening over depth"),
+                                   (slip_cm, "max", "-", "max slip magnitude over depth"),
+                                   (dip_cm, "mean", "--", "mean dip slip (+: plus side up)")):
+        c, v = _binned(s, val, nbins, how)
+        ax.plot(c, v, style, label=label)
+    ax.axhline(0.0, color="0.6", lw=0.8)
+    ax.set_xlim(s.min(), s.max())
+    ax.set_xlabel(f"{names[ia]} along the fault (m)")
+    ax.set_ylabel("cm")
+    side = f"plus side: {names[axis]} > {plane:g} m" if axis < 2 else "plus side: above"
+    ax.set_title(f"profiles along strike ({side}; dip slip = u_z(plus) - u_z(minus) on a vertical fault)")
+    ax.legend(loc="best", fontsize=9)
+    ax.grid(alpha=0.3)
+    out = out or os.path.join(run_dir, FIGURES[0])
+    return _save(fig, out)
+
+
+def _fault_trace(run_dir, ztop, rtol=1e-9):
+    """Points (k, 2) of the fault trace on the land surface, sorted along it, or None."""
+    if not has_fault(run_dir):
+        return None
+    snap = read_fault(run_dir, 0)
+    pts = snap.points
+    used = np.unique(snap.cells)
+    p = pts[used]
+    p = p[np.abs(p[:, 2] - ztop) <= rtol * max(np.ptp(pts, axis=0).max(), 1.0)]
+    if len(p) < 2:
+        return None
+    along = int(np.argmax(np.ptp(p[:, :2], axis=0)))
+    return p[np.argsort(p[:, along]), :2]
+
+
+def _layer_with_largest(points, values, rtol=1e-9):
+    """z of the horizontal node layer holding the largest value, and the mask of its nodes."""
+    z = points[:, 2]
+    tol = rtol * max(np.ptp(points, axis=0).max(), 1.0)
+    zl = z[int(np.argmax(values))]
+    return zl, np.abs(z - zl) <= tol
+
+
+def profile_along_x(points, tris, values, xs, y0):
+    """P1 values on surface triangles sampled at (xs, y0) (NaN outside). Split fault vertices make the
+    triangulation non-conforming for matplotlib's tri finders, so this is a direct barycentric search over
+    the triangles whose y-range holds y0; at a point on a fault trace the first triangle found wins."""
+    P = points[tris][:, :, :2]
+    band = (P[:, :, 1].min(axis=1) <= y0) & (P[:, :, 1].max(axis=1) >= y0)
+    P, T = P[band], tris[band]
+    x0 = P[:, 0]
+    e1, e2 = P[:, 1] - x0, P[:, 2] - x0
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    qx = xs[None, :] - x0[:, :1]
+    qy = (y0 - x0[:, 1])[:, None]
+    l1 = (qx * e2[:, 1:2] - qy * e2[:, 0:1]) / det[:, None]
+    l2 = (e1[:, 0:1] * qy - e1[:, 1:2] * qx) / det[:, None]
+    l0 = 1.0 - l1 - l2
+    eps = 1e-9
+    inside = (l0 >= -eps) & (l1 >= -eps) & (l2 >= -eps)
+    j = np.argmax(inside, axis=0)
+    cols = np.arange(len(xs))
+    v = values[T]
+    out = l0[j, cols] * v[j, 0] + l1[j, cols] * v[j, 1] + l2[j, cols] * v[j, 2]
+    return np.where(inside.any(axis=0), out, np.nan)
+
+
+def _nice_levels(vmin, vmax, n=20):
+    from matplotlib.ticker import MaxNLocator
+    if not vmax > vmin:
+        vmax = vmin + 1e-6
+    return MaxNLocator(nbins=n).tick_values(vmin, vmax)
+
+
+def subsidence_figure(run_dir, out=None, step=-1):
+    """Land subsidence map (and the drawdown map of flow scenes) at one output time, with a subsidence profile
+    along x through the point of largest subsidence; returns the PNG path."""
+    plt = _pyplot()
+    from matplotlib.tri import Triangulation
+    snap = read_fields(run_dir, step)
+    pts, tets = snap.points, snap.cells
+    sub = -snap.point_data["displacement"][:, 2]
+    top = top_surface(pts, tets)
+    on_top = np.unique(top)
+    options = read_options(run_dir)
+    wells = wells_from_options(options)
+    trace = _fault_trace(run_dir, pts[:, 2].max())
+    head = snap.point_data.get("head_change")
+    scene = _scene(run_dir)
+    km = 1e-3
+    ncol = 2 if head is not None else 1
+    lx, ly = np.ptp(pts[:, 0]), np.ptp(pts[:, 1])
+    map_h = min(max(5.2 * ly / lx, 4.2), 8.5)
+    tall = ly > 1.5 * lx            # profile beside the map(s) rather than below
+    if tall:
+        fig = plt.figure(figsize=(map_h * lx / ly * 1.6 * ncol + 6.0, map_h), constrained_layout=True)
+        gs = fig.add_gridspec(1, ncol + 1, width_ratios=[1.0] * ncol + [1.6])
+        prof_spec = gs[0, ncol].subgridspec(3, 1, height_ratios=[1, 2, 1])[1]
+    else:
+        fig = plt.figure(figsize=(6.4 * ncol, map_h + 3.2), constrained_layout=True)
+        gs = fig.add_gridspec(2, ncol, height_ratios=[map_h, 2.6])
+        prof_spec = gs[1, :]
+
+    def decorate(ax):
+        if trace is not None:
+            ax.plot(trace[:, 0] * km, trace[:, 1] * km, "w-", lw=2.2)
+            ax.plot(trace[:, 0] * km, trace[:, 1] * km, "k--", lw=1.0, label="fault trace")
+        if len(wells):
+            ax.plot(wells[:, 0] * km, wells[:, 1] * km, "v", ms=7, mfc="white", mec="black", label="wells")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (km)")
+        ax.set_ylabel("y (km)")
+        if trace is not None or len(wells):
+            ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+
+    ax = fig.add_subplot(gs[0, 0])
+    tri = Triangulation(pts[:, 0] * km, pts[:, 1] * km, top)
+    imax = on_top[int(np.argmax(sub[on_top]))]
+    smax = float(sub[imax])
+    levels = _nice_levels(min(0.0, float(np.min(sub[on_top]))), smax)
+    cf = ax.tricontourf(tri, sub, levels=levels, cmap="YlOrRd")
+    ax.tricontour(tri, sub, levels=levels[::2], colors="k", linewidths=0.4, alpha=0.5)
+    cb = fig.colorbar(cf, cax=ax.inset_axes([1.03, 0.0, 0.04, 1.0]))
+    cb.set_label("subsidence -u_z (m)")
+    y0 = float(pts[imax, 1])
+    ax.axhline(y0 * km, color="tab:blue", lw=0.8, ls=":", label="profile")
+    ax.set_title(f"{scene}: land subsidence, max {smax:.3g} m\n{_title_time(snap.time)}")
+    decorate(ax)
+
+    if head is not None:
+        ax = fig.add_subplot(gs[0, 1])
+        dd = -head
+        zl, layer = _layer_with_largest(pts, dd)
+        xy, idx = np.unique(np.round(pts[layer, :2], 6), axis=0, return_index=True)
+        d = dd[np.flatnonzero(layer)[idx]]
+        tri2 = Triangulation(xy[:, 0] * km, xy[:, 1] * km)
+        dmax = float(d.max())
+        levels = _nice_levels(min(0.0, float(d.min())), dmax)
+        cf = ax.tricontourf(tri2, d, levels=levels, cmap="Blues")
+        ax.tricontour(tri2, d, levels=levels[::2], colors="k", linewidths=0.4, alpha=0.5)
+        cb = fig.colorbar(cf, cax=ax.inset_axes([1.03, 0.0, 0.04, 1.0]))
+        cb.set_label("drawdown (m of head)")
+        ax.set_title(f"drawdown at z = {zl:g} m (the node layer where it is largest), max {dmax:.3g} m\n"
+                     f"{_title_time(snap.time)}", fontsize=10)
+        decorate(ax)
+
+    # profile along x at the y of the largest subsidence (both sides of a fault trace are kept apart by the
+    # surface triangles; the interpolation picks one side exactly on the trace)
+    ax = fig.add_subplot(prof_spec)
+    x = np.linspace(pts[:, 0].min(), pts[:, 0].max(), 1201)
+    prof = profile_along_x(pts, top, sub, x, y0)
+    ax.plot(x * km, prof, color="tab:red")
+    if trace is not None:
+        for xt in np.unique(np.round(trace[:, 0], 3)):
+            ax.axvline(xt * km, color="k", ls="--", lw=0.8)
+    if len(wells):
+        for wx in wells[:, 0]:
+            ax.axvline(wx * km, color="tab:blue", ls=":", lw=0.8)
+    ax.invert_yaxis()
+    ax.set_xlim(x[0] * km, x[-1] * km)
+    ax.set_xlabel("x (km)")
+    ax.set_ylabel("subsidence (m), down")
+    ax.set_title(f"subsidence profile along y = {y0 * km:.3g} km (dashed: fault trace" +
+                 (", dotted: wells)" if len(wells) else ")"), fontsize=10)
+    ax.grid(alpha=0.3)
+    out = out or os.path.join(run_dir, FIGURES[1])
+    return _save(fig, out)
+
+
+def histories_figure(run_dir, out=None):
+    """Maxima against time and solver work per step, from summary.json; returns the PNG path."""
+    plt = _pyplot()
+    summary = read_summary(run_dir)
+    steps = summary["steps"]
+    t = np.array([r["time_s"] for r in steps]) / YEAR
+
+    def col(key):
+        return np.array([r.get(key, 0.0) for r in steps], dtype=float)
+
+    panels = [("max_subsidence_m", "max land subsidence", "m", 1.0)]
+    if any("max_fault_opening_m" in r for r in steps):
+        panels += [("max_fault_opening_m", "max fault opening", "cm", 100.0),
+                   ("max_fault_slip_m", "max fault slip", "cm", 100.0)]
+    if any("max_drawdown_m" in r for r in steps):
+        panels.append(("max_drawdown_m", "max drawdown", "m of head", 1.0))
+    n = len(panels) + 1
+    ncol = 3 if n > 4 else 2
+    nrow = -(-n // ncol)
+    fig, axs = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.4 * nrow), constrained_layout=True, squeeze=False)
+    axs = axs.ravel()
+    for ax, (key, title, unit, scale) in zip(axs, panels):
+        ax.plot(t, scale * col(key), "o-", ms=4)
+        ax.set_title(title)
+        ax.set_xlabel("time (years)")
+        ax.set_ylabel(unit)
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+    ax = axs[len(panels)]
+    newton = col("newton_its")
+    fact = col("factorizations")
+    width = 0.8 * (t[1] - t[0]) if len(t) > 1 else 0.8
+    ax.bar(t, newton, width=width, color="tab:blue", label="Newton iterations")
+    if np.any(fact > 0):
+        ax.plot(t, fact, "s", color="tab:red", label="factorisations")
+    ax.set_title("solver work per step")
+    ax.set_xlabel("time (years)")
+    ax.set_ylabel("count")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    for ax in axs[len(panels) + 1:]:
+        ax.set_visible(False)
+    fig.suptitle(f"{summary.get('scene', '')}: {summary['mesh']['nodes']:,} nodes, {summary['mesh']['cells']:,} "
+                 f"tetrahedra, {summary['ranks']} rank(s)" + ("" if summary.get("converged", True)
+                                                              else " (a step did NOT converge)"))
+    out = out or os.path.join(run_dir, FIGURES[2])
+    return _save(fig, out)
+
+
+def read_surface(run_dir, step=-1):
+    """Land-surface triangles and fields at one time: point data ``displacement`` (m), cell data
+    ``horizontal_strain``, ``angular_distortion`` (pfault.io.hazard)."""
+    return _read_series(os.path.join(run_dir, "surface.xdmf"), step, "triangle")
+
+
+def has_surface(run_dir):
+    return os.path.exists(os.path.join(run_dir, "surface.xdmf"))
+
+
+def hazard_figure(run_dir, out=None, step=-1):
+    """Earth-fissure hazard map of the land surface at one output time: largest horizontal principal strain
+    and angular distortion per surface triangle, fault traces dashed, maxima marked, and the largest value
+    of each over y against x; returns the PNG path."""
+    plt = _pyplot()
+    from matplotlib.tri import Triangulation
+    snap = read_surface(run_dir, step)
+    pts, tris, cd = snap.points, snap.cells, snap.cell_data
+    trace = _fault_trace(run_dir, pts[:, 2].max())
+    km = 1e-3
+    lx, ly = np.ptp(pts[:, 0]), np.ptp(pts[:, 1])
+    map_h = min(max(5.0 * ly / max(lx, 1e-300), 4.0), 8.0)
+    fig = plt.figure(figsize=(max(2 * map_h * lx / max(ly, 1e-300) * 1.35 + 1.5, 9.0), map_h + 3.6),
+                     constrained_layout=True)
+    gs = fig.add_gridspec(2, 2, height_ratios=[map_h, 2.6])
+    tri = Triangulation(pts[:, 0] * km, pts[:, 1] * km, tris)
+    centroids = pts[tris].mean(axis=1)
+    panels = (("horizontal_strain", "RdBu_r", "largest horizontal principal strain (tension +)"),
+              ("angular_distortion", "viridis", "angular distortion |grad u_z|"))
+    for col, (key, cmap, label) in enumerate(panels):
+        ax = fig.add_subplot(gs[0, col])
+        val = cd[key]
+        i = int(np.argmax(val))
+        vmax = max(float(np.max(np.abs(val))), 1e-12)
+        vmin = -vmax if key == "horizontal_strain" else 0.0
+        pc = ax.tripcolor(tri, facecolors=val, cmap=cmap, vmin=vmin, vmax=vmax, edgecolors="none")
+        fig.colorbar(pc, ax=ax, shrink=0.9, pad=0.02).set_label(label)
+        if trace is not None:
+            ax.plot(trace[:, 0] * km, trace[:, 1] * km, "k--", lw=1.0, label="fault trace")
+        ax.plot(centroids[i, 0] * km, centroids[i, 1] * km, "*", ms=13, mfc="gold", mec="black",
+                label=f"max {val[i]:.3g} at ({centroids[i, 0]:.0f}, {centroids[i, 1]:.0f}) m")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (km)")
+        ax.set_ylabel("y (km)")
+        ax.set_title(f"{label.split(' (')[0]}, {_title_time(snap.time)}", fontsize=10)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8, ncol=1, framealpha=0.85)
+    # across the maps: the largest value over y in bins of x
+    ax = fig.add_subplot(gs[1, :])
+    nbins = int(np.clip(len(tris) // 20, 20, 400))
+    for key, color in (("horizontal_strain", "tab:red"), ("angular_distortion", "tab:green")):
+        c, v = _binned(centroids[:, 0], cd[key], nbins, "max")
+        ax.plot(c * km, v, color=color, label=f"largest {key.replace('_', ' ')} over y")
+    if trace is not None:
+        for xt in np.unique(np.round(trace[:, 0], 3)):
+            ax.axvline(xt * km, color="k", ls="--", lw=0.8)
+    ax.set_xlim(pts[:, 0].min() * km, pts[:, 0].max() * km)
+    ax.set_xlabel("x (km)")
+    ax.set_ylabel("strain, slope (-)")
+    ax.set_title("profile across the maps (dashed: fault trace)", fontsize=10)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.suptitle(f"{_scene(run_dir)}: earth-fissure hazard of the land surface")
+    out = out or os.path.join(run_dir, FIGURES[3])
+    return _save(fig, out)
+
+
+def make_figures(run_dir, step=-1):
+    """All figures of a run directory; returns the paths written."""
+    paths = []
+    if has_fault(run_dir):
+        paths.append(fault_figure(run_dir, step=step))
+    paths.append(subsidence_figure(run_dir, step=step))
+    paths.append(histories_figure(run_dir))
+    if has_surface(run_dir):
+        paths.append(hazard_figure(run_dir, step=step))
+    return paths
+
+
+def write_run_figures(run_dir):
+    """The figures a finished run writes next to its output (rank 0). A figure that fails is reported, not
+    raised: the run's results are on disk already."""
+    import sys
+    try:
+        return make_figures(run_dir)
+    except Exception as exc:          # noqa: BLE001 (plotting must not turn a finished run into a failure)
+        sys.stderr.write(f"pfault: warning: figures not written ({type(exc).__name__}: {exc}); "
+                         f"python -m pfault.study.figures {run_dir} makes them\n")
+        return []
