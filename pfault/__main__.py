@@ -211,5 +211,17 @@ def main(argv=None):
     return cli.main(scene, argv)
 
 
+def run(argv=None):
+    """main(), with Ctrl-C before the run's own handling of it (while PETSc and pfault are imported) one line
+    and exit code 7 instead of a traceback."""
+    try:
+        return main(argv)
+    except KeyboardInterrupt:
+        from pfault.errors import Interrupted, as_pfault_error
+        err = as_pfault_error(KeyboardInterrupt())
+        _say(err.line())
+        return Interrupted.exit_code
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run())

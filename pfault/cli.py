@@ -53,7 +53,7 @@ def main(options_file, argv):
         sim.setup()
         summary = sim.run()
         run_on_root(comm, sim.write_summary, time.perf_counter() - t0)
-    except Exception as exc:  # noqa: BLE001  (every failure ends the run through the guard)
+    except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001  (every failure ends the run through the guard)
         err = as_pfault_error(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
         code = guard.settle(err)
         # reached only when every rank failed together

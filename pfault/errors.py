@@ -94,14 +94,24 @@ class InternalError(PfaultError):
     kind = "internal error"
 
 
+class Interrupted(PfaultError):
+    """Ctrl-C (SIGINT, Python's KeyboardInterrupt) outside the time loop, which has its own handlers
+    (pfault.interrupt): the run stops where it is."""
+    exit_code = EXIT_INTERRUPTED
+    kind = "stopped"
+
+
 _KINDS = {cls.__name__: cls for cls in (PfaultError, InputError, OutputError, OutOfMemory, StepNotConverged,
-                                        InternalError)}
+                                        InternalError, Interrupted)}
 
 
 def as_pfault_error(exc):
     """The PfaultError an exception ends the run with (out of memory, a full disk and bugs included)."""
     if isinstance(exc, PfaultError):
         return exc
+    if isinstance(exc, KeyboardInterrupt):
+        return Interrupted("SIGINT outside the time loop (start-up, meshing, setup, or the figures at the end): "
+                           "the run stopped at once; every step it completed is on disk")
     if isinstance(exc, MemoryError):
         return OutOfMemory(f"out of memory ({exc or 'an allocation failed'}); use a smaller mesh "
                            "(-pfault_box_cells, -pfault_mesh_size_factor) or more nodes")
