@@ -94,7 +94,8 @@ def set_history(f, rng, g_prev, t_prev):
     """Start-of-step jump and traction (local frame) of the owned faces; gathered copy for the stabilisation."""
     g = np.asarray(g_prev)[None, :] + 1e-4 * rng.normal(size=(f.nf, 3))
     t = np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.nf, 3))
-    f.start = StepStart(g, t, f.gather_faces(t), np.zeros(f.nf, np.int64))
+    f.t_ref_all = f.gather_faces(t)
+    f.start = StepStart(g, t, np.zeros(f.nf, np.int64))
 
 
 # multipliers (local frame = global here: n = +x) and plus-side jumps that put a face in each branch: stuck
