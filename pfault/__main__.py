@@ -12,29 +12,12 @@ overriding a file is the normal way to change a scene and says nothing).
 
 import os
 import sys
-from dataclasses import dataclass
 
 from pfault.errors import EXIT_INPUT, EXIT_USAGE
+from pfault.optionsfile import COMMAND_LINE, ArgumentError, _entry_or_include, is_option_name, read_options_file
 
 USAGE = ("usage: mpirun -n N python -m pfault SCENE.opts [-option value ...]   (python -m pfault -help lists the "
          "options and exit codes)")
-COMMAND_LINE = "the command line"
-
-
-class ArgumentError(Exception):
-    """One line, and the exit code it ends the run with."""
-
-    def __init__(self, message, code):
-        super().__init__(message)
-        self.code = code
-
-
-@dataclass(frozen=True)
-class Entry:
-    name: str           # without the leading '-', lower case (PETSc's names are case-insensitive)
-    value: object       # str or None
-    source: str         # a file name or COMMAND_LINE
-    line: int           # line in the file (0 on the command line)
 
 
 def _first_rank():
@@ -49,74 +32,6 @@ def _say(text):
     if _first_rank():
         sys.stderr.write(text + "\n")
         sys.stderr.flush()
-
-
-def is_option_name(token):
-    """PETSc's rule (PetscOptionsValidKey): '-' or '--' then a letter, and not a number such as -inf."""
-    body = token[2:] if token.startswith("--") else token[1:]
-    if not token.startswith("-") or not body[:1].isalpha():
-        return False
-    try:
-        float(token)
-    except ValueError:
-        return True
-    return False
-
-
-def _name(token):
-    return (token[2:] if token.startswith("--") else token[1:]).lower()
-
-
-def read_options_file(path, included_by=()):
-    """Entries of a PETSc options file, nested -options_file expanded in place (paths relative to the
-    working directory, as PETSc reads them). Raises ArgumentError (exit 1) for what PETSc would reject."""
-    if path in included_by:
-        raise ArgumentError(f"{included_by[-1]}: -options_file {path} is already being read (the files "
-                            "include each other); remove the loop", EXIT_INPUT)
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise ArgumentError(f"options file {path}: cannot read it ({exc.strerror})", EXIT_INPUT) from None
-    try:
-        if b"\0" in data:
-            raise UnicodeDecodeError("utf-8", data, 0, 1, "NUL byte")
-        text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        raise ArgumentError(f"{path}: not a text options file (binary content); give a PETSc options file "
-                            "such as config/demo.opts", EXIT_INPUT) from None
-    entries = []
-    for number, line in enumerate(text.splitlines(), start=1):
-        tokens = line.split("#", 1)[0].split()
-        if not tokens or tokens[0] == "alias":
-            continue
-        where = f"{path} line {number}"
-        if not is_option_name(tokens[0]):
-            raise ArgumentError(f"{where}: '{tokens[0]}' is not an option name (one '-name value' per line, "
-                                "comments after '#')", EXIT_INPUT)
-        second = next((t for t in tokens[1:] if is_option_name(t)), None)
-        if second:
-            raise ArgumentError(f"{where}: two options on one line ({tokens[0]} ... {second}); give one per line",
-                                EXIT_INPUT)
-        if len(tokens) > 2:
-            raise ArgumentError(f"{where}: {tokens[0]} has more than one value ('{' '.join(tokens[1:])}'); "
-                                "lists are comma-separated without spaces", EXIT_INPUT)
-        value = tokens[1] if len(tokens) == 2 else None
-        entries += _entry_or_include(tokens[0], value, path, number, included_by)
-    return entries
-
-
-def _entry_or_include(token, value, source, line, included_by):
-    name = _name(token)
-    if name != "options_file":
-        return [Entry(name, value, source, line)]
-    where = f"{source} line {line}" if line else "on the command line"
-    if value is None:
-        raise ArgumentError(f"{where}: -options_file needs a file name", EXIT_INPUT)
-    if not os.path.isfile(value):
-        raise ArgumentError(f"{where}: -options_file {value}: no such file (paths are relative to the "
-                            f"directory pfault runs in, {os.getcwd()})", EXIT_INPUT)
-    return read_options_file(value, included_by + ((source,) if line else ()))
 
 
 def read_command_line(tokens, scene):

@@ -134,6 +134,10 @@ CASES = [
     Case("missing_nested_file", scene_file(f"-options_file {OED}\n-options_file config/solver/none.opts\n"), 1,
          "line 2: -options_file config/solver/none.opts: no such file"),
     Case("include_loop", include_loop, 1, "is already being read (the files include each other)"),
+    Case("malformed_solver_file", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", str(out),
+                                                            "-pfault_solver", write(tmp / "solver.opts",
+                                                                                    "-ksp_type cg -pc_type gamg\n")],
+         1, "solver.opts line 1: two options on one line (-ksp_type ... -pc_type)"),
     Case("missing_options_file_on_command_line", scene("-options_file", "none.opts"), 1,
          "on the command line: -options_file none.opts: no such file"),
     # option values: exit 1

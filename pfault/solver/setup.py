@@ -18,29 +18,13 @@ def set_default(name, value):
 
 
 def read_options_file(path):
-    """(name, value) pairs of a PETSc options file (comments with #; nested -options_file followed)."""
-    import re
-    pairs = []
-    with open(path) as fh:
-        tokens = []
-        for line in fh:
-            tokens += line.split("#", 1)[0].split()
-    opt = re.compile(r"^-[A-Za-z_]")
-    i = 0
-    while i < len(tokens):
-        name = tokens[i]
-        if not opt.match(name):
-            raise InputError(f"{path}: expected an option name, got '{name}'")
-        value = None
-        if i + 1 < len(tokens) and not opt.match(tokens[i + 1]):
-            value = tokens[i + 1]
-            i += 1
-        i += 1
-        if name == "-options_file" and value:
-            pairs += read_options_file(value)
-        else:
-            pairs.append((name[1:], value))
-    return pairs
+    """(name, value) pairs of a PETSc options file, read strictly (pfault.optionsfile): a malformed solver file
+    is an InputError naming the file and line."""
+    from ..optionsfile import ArgumentError, read_options_file as read
+    try:
+        return [(e.name, e.value) for e in read(path)]
+    except ArgumentError as exc:
+        raise InputError(str(exc)) from None
 
 
 def find_solver_file(name, scene_file=""):
