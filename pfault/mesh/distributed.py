@@ -115,6 +115,7 @@ def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=No
 
     part = dm.getPartitioner()
     part.setFromOptions()
+    part.destroy()          # our reference; the DM keeps its own
     migration = dm.distribute() if comm.size > 1 else None
     p_start, p_end = dm.getChart()
     if migration is not None:

@@ -27,38 +27,6 @@ Discretisation
   localToGlobal(ADD) without double counting. The part of the screen outside the mesh is an error.
 - Solver: KSP with prefix ``flow_``; code defaults, each only where the user is silent: -flow_ksp_type cg,
   -flow_pc_type hypre (BoomerAMG; gamg if PETSc has no hypre), -flow_ksp_rtol 1e-10.
-
-Wiring (for pfault/simulation.py; not done here)
-------------------------------------------------
-In ``Simulation.setup``:
-
-1. After ``self.materials = scn.read_materials(...)``, if ``reader.get("pfault_flow")``:
-       from .solver.flow import read_flow_settings, fixed_head_vertices, FIXED_HEAD_BIT, GroundwaterFlow
-       self.flow_settings = read_flow_settings(reader, self.material_names, self.materials,
-                                               self.surface_names, s.water_density, s.gravity)
-   (reads -pfault_material_<m>_hydraulic_conductivity / _specific_storage / _void_ratio,
-   -pfault_flow_wells, -pfault_flow_well_screen, -pfault_flow_well_rate, -pfault_flow_fixed_head_surfaces,
-   -pfault_flow_substeps; must run before ``reader.check_pfault_options()``). A scene with flow must not
-   also give per-material head_drawdown/pressure_change tables (raise InputError if
-   ``self.drawdown.active``), or sum the two sources.
-2. In ``arrays()`` (rank 0), on the vertex mask returned by ``scn.boundary_arrays``:
-       mask |= FIXED_HEAD_BIT * fixed_head_vertices(serial, self.flow_settings.fixed_head_surfaces)
-   so that the fixed-head flag travels with the vertices (bit 3 of vert_data[:, 0]; the elastic
-   constraints use bits 0-2 only).
-3. After ``distributed.build(...)``, in the Setup stage, before ``check_unused_petsc_options``:
-       fs = self.flow_settings
-       mat = self.mesh.cell_material
-       self.flow = GroundwaterFlow(self.mesh, fs.conductivity[mat], fs.storage[mat], wells=fs.wells,
-                                   fixed_head=(self.mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0,
-                                   substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity)
-   and pass ``self.flow`` instead of ``self.drawdown`` to ``ElasticProblem`` / ``FaultProblem`` (it has
-   ``active`` and
-   ``cell_values(t, cell_material, centroids=None)``; times must not go backwards, which the time loop
-   satisfies). Optionally write ``self.flow.vertex_head()`` (gathered with
-   ``distributed.gather_vertex_values``) as a point field ``head`` (m), and add
-   ``self.flow.history[-1]["ksp_its"]`` to the step record.
-4. ``Simulation.destroy``: ``self.flow.destroy()`` before the mesh DM is destroyed. A FlowNotConverged
-   exception (raised on every rank together) should end the run like a non-converged step (exit 3).
 """
 
 from __future__ import annotations
