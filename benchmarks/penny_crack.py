@@ -98,7 +98,7 @@ def main(argv=None):
         check = {"n": n, "exit_code": proc.returncode, "run_s": round(wall, 2)}
         if summary is not None:
             step = summary["steps"][-1]
-            check.update({k: step.get(k) for k in ("converged", "reason", "newton_its", "active_set_its", "stick",
+            check.update({k: step.get(k) for k in ("converged", "reason", "newton_its", "factorizations", "stick",
                                                    "slip", "open")})
         if proc.returncode == 0:
             w_ref = read_fault_step(os.path.join(args.out, f"n{n}_r{args.ranks}"))[2]["opening"]
@@ -109,7 +109,7 @@ def main(argv=None):
         else:
             print(f"without stabilisation (n = {n}): exit code {proc.returncode}, converged "
                   f"{check.get('converged')}, SNES reason {check.get('reason')} after {check.get('newton_its')} "
-                  f"Newton its in active-set iteration {check.get('active_set_its')} (states stick/slip/open "
+                  f"Newton its, {check.get('factorizations')} factorisations (states stick/slip/open "
                   f"{check.get('stick')}/{check.get('slip')}/{check.get('open')})")
         result["without_stabilisation"] = check
     print(json.dumps(result))

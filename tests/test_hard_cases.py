@@ -19,9 +19,6 @@ pytestmark = pytest.mark.mpi               # runs under mpirun; part of the defa
 TIMEOUT = 900                              # seconds for the whole quick study: a hung run fails the test
 # quick cases the solver fails today, with the symptom (see README, "Hard cases study")
 KNOWN_FAILURES = {
-    "contrast_1e5_stiff_above": "slip error 4e-5: Newton stops at rtol |f|, f dominated by the stiff side's "
-                                "prescribed displacement",
-    "proportional_40_steps": "the stabilised jump acts on the step's traction increment: 1 and 40 steps differ",
     "penalty_10000_E_over_h": "penalty at 100 and 1e4 E/h stays 20 % from the Lagrange answer; step 10 is cut in 2",
     "two_faults_crossing": "fault junctions are rejected at input",
 }

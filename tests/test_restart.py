@@ -28,7 +28,7 @@ SCENES = {
     "oedometer": ("config/oedometer.opts", (), "10", "5"),
     "queretaro": ("config/queretaro.opts", ("-pfault_mesh_size_factor", "6", "-flow_ksp_rtol", "1e-13"), "10*year",
                   "5*year"),
-    "wuxi": ("config/wuxi.opts", ("-pfault_mesh_size_factor", "4"), "10*year", "5*year"),
+    "wuxi": ("config/wuxi.opts", ("-pfault_mesh_size_factor", "4"), "2*year", "1*year"),   # slip and open faces
     "flow": ("flow_box.opts", (), "2*day", "1*day"),
 }
 FLOW_BOX = """# a 2x2x2-cell box drained by one well, no fault

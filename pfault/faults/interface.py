@@ -127,9 +127,11 @@ class FaultInterface:
         The augmentation is E/h with E the harmonic mean of the two sides' moduli, capped where the
         stabilisation needs it: the law's argument t + c g_stab, with g_stab = g + S_f (dt_nb - dt) / A,
         decreases with the face's own traction once c S_f / A > 1, and a state can then have no solution
-        (measured on Wuxi: c S_f / A = 3 to 6 at E/h, and Newton cycles between open and closed at the opening front
-        or flips a slip direction every iteration). The cap c <= A / (2 lambda_max(S_f)) keeps it increasing;
-        the solution does not depend on c."""
+        (with S at its full compliance estimate Wuxi had c S_f / A = 3 to 6 at E/h, and Newton cycled between
+        open and closed at the opening front or flipped a slip direction every iteration). The cap
+        c <= A / (2 lambda_max(S_f)) keeps it increasing; with S at 1 % of the estimate it is inactive on the
+        paper-size meshes (c lambda_max(S_f) / A: median 0.05 on Wuxi, 0.19 on Queretaro). The solution does
+        not depend on c."""
         coh = np.array([s.cohesion for s in self.settings])[self.fault]
         tphi = np.tan(np.radians([s.friction_angle for s in self.settings]))[self.fault]
         h = np.maximum(self.h, 1e-300)
