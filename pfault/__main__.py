@@ -11,6 +11,7 @@ overriding a file is the normal way to change a scene and says nothing).
 """
 
 import os
+import signal
 import sys
 
 from pfault.errors import EXIT_INPUT, EXIT_USAGE
@@ -126,15 +127,22 @@ def main(argv=None):
     return cli.main(scene, argv)
 
 
+def _stop_signal(signum, frame):
+    from pfault.errors import StopSignal
+    raise StopSignal(signal.Signals(signum).name)
+
+
 def run(argv=None):
-    """main(), with Ctrl-C before the run's own handling of it (while PETSc and pfault are imported) one line
-    and exit code 7 instead of a traceback."""
+    """main(), with a stop signal before the run's own handling of it one line and exit code 7 instead of a
+    traceback or a death by signal: Ctrl-C (SIGINT) raises KeyboardInterrupt, and SIGTERM and SIGUSR1 raise
+    StopSignal from here on (the time loop installs its own handlers and puts these back after it)."""
+    for sig in (signal.SIGTERM, signal.SIGUSR1):
+        signal.signal(sig, _stop_signal)
     try:
         return main(argv)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         from pfault.errors import Interrupted, as_pfault_error
-        err = as_pfault_error(KeyboardInterrupt())
-        _say(err.line())
+        _say(as_pfault_error(exc).line())
         return Interrupted.exit_code
 
 

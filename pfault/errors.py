@@ -95,10 +95,20 @@ class InternalError(PfaultError):
 
 
 class Interrupted(PfaultError):
-    """Ctrl-C (SIGINT, Python's KeyboardInterrupt) outside the time loop, which has its own handlers
-    (pfault.interrupt): the run stops where it is."""
+    """Ctrl-C (SIGINT, Python's KeyboardInterrupt) or SIGTERM / SIGUSR1 (StopSignal) outside the time loop,
+    which has its own handlers (pfault.interrupt): the run stops where it is."""
     exit_code = EXIT_INTERRUPTED
     kind = "stopped"
+
+
+class StopSignal(KeyboardInterrupt):
+    """SIGTERM or SIGUSR1 outside the time loop, raised by the handler ``pfault.__main__`` installs at start-up
+    (without it the signal's default action would end the process with no message and no exit code of
+    ours)."""
+
+    def __init__(self, name):
+        super().__init__(name)
+        self.name = name
 
 
 _KINDS = {cls.__name__: cls for cls in (PfaultError, InputError, OutputError, OutOfMemory, StepNotConverged,
@@ -110,7 +120,7 @@ def as_pfault_error(exc):
     if isinstance(exc, PfaultError):
         return exc
     if isinstance(exc, KeyboardInterrupt):
-        return Interrupted("SIGINT outside the time loop (start-up, meshing, setup, or the figures at the end): "
+        return Interrupted(f"{getattr(exc, 'name', 'SIGINT')} outside the time loop (start-up, meshing, setup, or the figures at the end): "
                            "the run stopped at once; every step it completed is on disk")
     if isinstance(exc, MemoryError):
         return OutOfMemory(f"out of memory ({exc or 'an allocation failed'}); use a smaller mesh "

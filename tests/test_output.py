@@ -142,19 +142,21 @@ def test_interrupted_run_is_readable_and_restarts(tmp_path, reference, ranks, si
     compare_runs(reference[ranks], run_dir, 1e-10)
 
 
-def test_ctrl_c_before_the_time_loop_is_one_line(tmp_path):
-    """SIGINT while a run starts up or meshes (a 30x30x30-cell box: seconds before its first step) stops it
-    at once with exit code 7 and one line, not a traceback; nothing is written."""
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGUSR1])
+def test_stop_signal_before_the_time_loop_is_one_line(tmp_path, sig):
+    """SIGINT (Ctrl-C), SIGTERM or SIGUSR1 while a run starts up or meshes (a 30x30x30-cell box: seconds before
+    its first step) stops it at once with exit code 7 and one line naming the signal, not a traceback or a
+    death by signal; nothing is written."""
     run_dir = tmp_path / "run"
     proc = subprocess.Popen(command(["-m", "pfault", "config/oedometer.opts", "-pfault_box_cells", "30,30,30",
                                      "-pfault_output_dir", str(run_dir)], 1),
                             cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(1.0)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     out, err = proc.communicate(timeout=TIMEOUT)
     assert proc.returncode == 7, out + err
     assert "step " not in out, "the signal came too late for this test: " + out
-    assert err.splitlines() == ["pfault: stopped: SIGINT outside the time loop (start-up, meshing, setup, or the "
+    assert err.splitlines() == [f"pfault: stopped: {sig.name} outside the time loop (start-up, meshing, setup, or the "
                                 "figures at the end): the run stopped at once; every step it completed is on disk"]
     assert not run_dir.exists() and not [f for f in os.listdir(tmp_path) if ".pfault-" in f]
 
