@@ -38,6 +38,15 @@ def _destroy(sim):
         sim.destroy()
 
 
+def _last_words(sim, line, code):
+    """A rank failing alone, before the job is aborted: rank 0 records the failure in the summary.json of a run
+    in place and removes its staging directory (other ranks hold no files)."""
+    if sim is not None and sim.comm.rank == 0:
+        sim.record_failure(line, code)
+        if getattr(sim, "writer", None) is not None:
+            sim.writer.abandon()
+
+
 def main(options_file, argv):
     from .options import help_text
     from .solver.flow import FlowNotConverged
@@ -55,7 +64,7 @@ def main(options_file, argv):
         run_on_root(comm, sim.write_summary, time.perf_counter() - t0)
     except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001  (every failure ends the run through the guard)
         err = as_pfault_error(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
-        code = guard.settle(err)
+        code = guard.settle(err, last_words=lambda line, code: _last_words(sim, line, code))
         # reached only when every rank failed together
         if sim is not None and guard.comm.rank == 0:
             sim.record_failure(err.line(), code)

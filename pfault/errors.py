@@ -195,9 +195,11 @@ class RunGuard:
     def __init__(self, comm):
         self.comm = _mpi(comm).Dup()
 
-    def settle(self, exc, wait=SETTLE_SECONDS):
+    def settle(self, exc, wait=SETTLE_SECONDS, last_words=None):
         """Called by a rank with an exception. Returns the exit code when every rank failed together (rank
-        0 prints the line); otherwise prints this rank's line and aborts the MPI job with the code."""
+        0 prints the line); otherwise prints this rank's line, calls ``last_words(line, exit code)`` (what
+        this rank alone can still record: rank 0 says in summary.json how the run ended) and aborts the MPI
+        job with the code."""
         err = as_pfault_error(exc)
         comm = self.comm
         if comm.size == 1:
@@ -208,6 +210,11 @@ class RunGuard:
         while not request.Test():
             if time.monotonic() > deadline:
                 self._print([_pack(err)], rank=comm.rank)
+                if last_words is not None:
+                    try:
+                        last_words(err.line(comm.rank), err.exit_code)
+                    except Exception:  # noqa: BLE001  (best effort: the job ends anyway)
+                        pass
                 from mpi4py import MPI
                 MPI.COMM_WORLD.Abort(err.exit_code)
             time.sleep(0.01)

@@ -203,6 +203,9 @@ CASES = [
     # faults on one rank only (rank 1 of 2): the job ends with the line and the code
     Case("bug_on_one_rank", inject("bug", 1, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial",
          alone=True),
+    Case("bug_on_rank_0", inject("bug", 0, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial"),
+    Case("bug_on_rank_0_before_any_step", inject("bug", 0, 1), 6, "RuntimeError: injected fault in step 1 (a bug",
+         "none"),
     Case("memory_on_one_rank", inject("memory", 1, 3), 5, "out of memory (injected: unable to allocate 8 GiB",
          "partial", alone=True),
     Case("flow_failure_after_two_steps", inject("flow", 0, 3), 3, "groundwater flow: injected: KSP flow_ did not "
@@ -251,6 +254,7 @@ def test_bad_input(tmp_path, case, ranks):
     assert len(lines) == 1, stderr[-3000:]            # printed once, by one rank
     assert case.message in lines[0], lines[0]
     assert ("Traceback" in stderr) == (case.code == 6), stderr[-3000:]
+    assert not [f for f in os.listdir(tmp_path) if ".pfault-" in f], os.listdir(tmp_path)   # no staging left
     if case.disk in ("none",):
         assert not os.path.exists(out)
     elif case.disk in ("kept", "file"):
