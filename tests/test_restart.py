@@ -150,8 +150,26 @@ def test_restart_rejects_a_time_grid_without_the_checkpoint(tmp_path):
     other = tmp_path / "other"
     proc, _ = run_scene("config/demo.opts", other, extra=["-pfault_box_cells", "3,3,3", "-pfault_restart", str(part)],
                         check=False)
-    assert proc.returncode == 1 and "checkpoint has nodes" in proc.stderr
+    assert proc.returncode == 1 and "that run had" in proc.stderr
     assert sorted(os.listdir(part)) == before and not os.path.exists(other)
+
+
+def test_restart_keeps_the_model_but_may_extend_the_loading(tmp_path):
+    """A continued run with another material modulus (a model change) is an input error naming the option,
+    before anything is written; one that extends a loading table past the old end time goes on."""
+    opts, extra, end, half = SCENES["oedometer"]
+    part = tmp_path / "part"
+    run_scene(opts, part, extra=_steps(extra, 2, half))
+    before = {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)}
+    proc, _ = run_scene(opts, part, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part),
+                                           "-pfault_material_soil_young_modulus", "20*MPa"], check=False)
+    assert proc.returncode == 1, proc.stderr
+    assert ("that run had -pfault_material_soil_young_modulus 10*MPa, this one -pfault_material_soil_young_modulus "
+            "20*MPa") in proc.stderr, proc.stderr
+    assert {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)} == before
+    proc, s = run_scene(opts, part, extra=[*_steps(extra, 8, "20"), "-pfault_restart", str(part),
+                                           "-pfault_material_soil_pressure_change", "0:0,10:-0.1*MPa,20:-0.2*MPa"])
+    assert s["converged"] and s["completed_steps"] == list(range(1, 9))
 
 
 def test_a_failed_continuation_keeps_the_checkpoint(tmp_path):
