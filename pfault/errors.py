@@ -120,7 +120,8 @@ def as_pfault_error(exc):
     if isinstance(exc, PfaultError):
         return exc
     if isinstance(exc, KeyboardInterrupt):
-        return Interrupted(f"{getattr(exc, 'name', 'SIGINT')} outside the time loop (start-up, meshing, setup, or the figures at the end): "
+        return Interrupted(f"{getattr(exc, 'name', 'SIGINT')} outside the time loop (start-up, meshing, setup, "
+                           "or the figures at the end): "
                            "the run stopped at once; every step it completed is on disk")
     if isinstance(exc, MemoryError):
         return OutOfMemory(f"out of memory ({exc or 'an allocation failed'}); use a smaller mesh "

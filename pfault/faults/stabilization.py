@@ -2,9 +2,9 @@
 
 Following Franceschini, Castelletto, White & Tchelepi (CMAME 2020): the constraint rows of two fault faces
 sharing an edge are coupled through S (the difference of their tractions' changes since the initial state),
-with S built from the local stiffness, so no user coefficient enters. The coupling enters the contact law through its jump argument
-(the stabilised jump A g + S (dt_b - dt_a)), so it acts on the components the face's state constrains:
-all three of a stuck face, the normal one of a slipping face, none of an open face.
+with S built from the local stiffness, so no user coefficient enters. The coupling enters the contact law
+through its jump argument (the stabilised jump A g + S (dt_b - dt_a)), so it acts on the components the face's
+state constrains: all three of a stuck face, the normal one of a slipping face, none of an open face.
 """
 
 from __future__ import annotations

@@ -62,8 +62,9 @@ def is_direct():
 
 def apply_solver_defaults(linear=False):
     """Code defaults, each only where the user is silent. A linear scene (no fault) needs one linear solve per
-    step: SNES type ksponly. A fault scene runs Newton (newtonls, full steps) on the semismooth residual; its step-size test is off (-snes_stol 0: the unknowns mix metres and pascals, so a
-    relative step size means nothing), its absolute tolerance is set per step from the load unless given
+    step: SNES type ksponly. A fault scene runs Newton (newtonls, full steps) on the semismooth residual; its
+    step-size test is off (-snes_stol 0: the unknowns mix metres and pascals, so a relative step size means
+    nothing), its absolute tolerance is set per step from the load unless given
     (Problem._load_tolerance). A direct factorisation is applied once per linear solve (preonly)."""
     opts = PETSc.Options()
     if linear:
