@@ -19,6 +19,8 @@ Contents (datasets; attributes on the root)
 - ``u/vertex``, ``u/cell_ids``, ``u/cell``: the solution (displacements and fault multipliers) at the step's
   time
 - ``u_ref/...``: the state at t = 0 (after the geostatic initial state)
+- ``u_previous/...``, attribute ``previous_time``: the state converged before u (a fault scene's predictor
+  extrapolates from it), when there is one
 - ``sigma0`` (cells x 9, Pa): the geostatic initial stress, when there is one
 - ``faults/t0`` (serial fault faces x 3, Pa, local frame), ``faults/pn`` (serial fault faces, Pa)
 - ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
@@ -114,7 +116,11 @@ def gather(sim):
     rank 0, None elsewhere. Collective."""
     p, mesh, dofmap = sim.problem, sim.mesh, sim.dofmap
     out = {}
-    for name, vec in (("u", p.u), ("u_ref", p.u_ref)):
+    vecs = [("u", p.u), ("u_ref", p.u_ref)]
+    if p.previous is not None:
+        vecs.append(("u_previous", p.previous[1]))
+        out["previous_time"] = p.previous[0]
+    for name, vec in vecs:
         arrays = gather_local(mesh, dofmap, p.local_array(vec))
         if arrays is not None:
             out.update({f"{name}/vertex": arrays[0], f"{name}/cell_ids": arrays[1], f"{name}/cell": arrays[2]})
@@ -141,14 +147,15 @@ def write(directory, sim, step, t, state):
              "cells": int(mesh.n_global_cells), "fault_faces": int(len(sim.fault_id)) if sim.fault_settings else 0,
              "dofs": int(p.u.getSize()), "fields": json.dumps(list(sim.dofmap.fields)),
              "geostatic": bool(sim.settings.geostatic), "flow": sim.flow is not None}
-    if "flow_time" in state:
-        attrs["flow_time"] = state["flow_time"]
+    for key in ("flow_time", "previous_time"):
+        if key in state:
+            attrs[key] = state[key]
     path = os.path.join(directory, NAME)
     with open_h5(path + TMP_SUFFIX, "w") as h5:
         for key, value in attrs.items():
             h5.attrs[key] = value
         for name, data in state.items():
-            if name != "flow_time":
+            if name not in ("flow_time", "previous_time"):
                 h5.create_dataset(name, data=data)
     os.replace(path + TMP_SUFFIX, path)
 
@@ -242,6 +249,12 @@ def restore(ckpt, sim):
 
     vec("u", p.u)
     vec("u_ref", p.u_ref)
+    p.t_now = float(ckpt["attrs"]["time_s"])
+    if "u_previous/vertex" in ckpt:
+        prev = p.u.duplicate()
+        vec("u_previous", prev)
+        p._set_previous(ckpt["attrs"]["previous_time"], prev)
+        prev.destroy()
     if "sigma0" in ckpt:
         p.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
     if p.faults is not None:

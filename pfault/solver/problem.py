@@ -80,6 +80,8 @@ class Problem:
         self._dp_interval = None
         self._jacobian_key = None       # faces' states of the assembled J while it depends on nothing else
         self._trial = None              # faces' states of a step's elastic trial while it is solved
+        self.t_now = 0.0                # time of the converged state in self.u
+        self.previous = None            # (time, state) converged before self.u: the predictor's history
         self.n_jacobians = 0             # interface Jacobians assembled (a configuration seen before is kept)
         if faults is not None:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
@@ -352,18 +354,19 @@ class Problem:
         return snes
 
     def solve_step(self, snes, t):
-        """Solve for time t from the converged state in self.u; returns the step record. With faults the step
-        starts from its elastic trial (one linear solve with the closed faces stuck and the open ones open,
-        counted as its first Newton iteration), from which SNES runs the semismooth Newton."""
+        """Solve for time t from the converged state in self.u (at self.t_now); returns the step record. With
+        faults SNES runs the semismooth Newton from the step's predictor (``_predict``)."""
         t0 = time.perf_counter()
         nfact, njac = (factorizations() if self.faults is not None else 0), self.n_jacobians
         trial = None
+        start = None
         if self.faults is not None:
             self.faults.begin_step(self.local_array(self.u))     # under the pore pressure it was solved for
+            start = self.u.copy()
         self.set_load(t)
         if self.faults is not None:
             self._load_tolerance(snes)
-            trial = self._elastic_trial(snes)
+            trial = self._predict(snes, t)
             snes.setConvergenceHistory(reset=True)
         snes.solve(None, self.u)
         reason = snes.getConvergedReason()
@@ -371,13 +374,60 @@ class Problem:
         rec = {"time_s": float(t), "newton_its": its, "ksp_its": int(snes.getLinearSolveIterations()),
                "wall_s": time.perf_counter() - t0, "converged": bool(reason > 0), "reason": int(reason)}
         if self.faults is not None:
-            rec["newton_its"] += 1
-            rec["ksp_its"] += trial[1]
+            history = [float(v) for v in snes.getConvergenceHistory()[0][:its + 1]]
+            if trial is None:
+                rec["predictor"] = "extrapolated"
+            else:
+                rec["predictor"] = "elastic trial"
+                rec["newton_its"] += 1
+                rec["ksp_its"] += trial[1]
+                history = [trial[0]] + history
             rec["factorizations"] = int(factorizations() - nfact)
             rec["jacobians"] = int(self.n_jacobians - njac)
-            rec["residual_history"] = [trial[0]] + [float(v) for v in snes.getConvergenceHistory()[0][:its + 1]]
+            rec["residual_history"] = history
             rec.update(self.faults.counts_by_state(self.local_array(self.u)))
+        if rec["converged"]:
+            if start is not None:
+                self._set_previous(self.t_now, start)
+            self.t_now = float(t)
+        if start is not None:
+            start.destroy()
         return rec
+
+    def _set_previous(self, t, u):
+        if self.previous is not None:
+            self.previous[1].destroy()
+        self.previous = (float(t), u.copy())
+
+    def _predict(self, snes, t):
+        """Move self.u to the step's predictor and return None, or do the elastic trial and return what it
+        returns. The predictor extrapolates the last step's increment to t (exact on a proportional loading:
+        the faces' states and slip directions carry on); it is kept when its residual is below that of the
+        converged state under the new load, and is not when the loading turns (a drawdown that stops, a
+        water table that recovers), where the elastic trial starts the step instead."""
+        if self.previous is None or not self.previous[0] < self.t_now < t:
+            return self._elastic_trial(snes)
+        t_a, u_a = self.previous
+        ratio = (t - self.t_now) / (self.t_now - t_a)
+        u_n = self.u.copy()
+        try:
+            self.residual(snes, self.u, self.F)
+            f_start = self.F.norm()
+            self.u.axpy(ratio, u_n)
+            self.u.axpy(-ratio, u_a)
+            self.residual(snes, self.u, self.F)
+            f_pred = self.F.norm()
+            if f_pred < f_start:
+                if self.contact.monitor:
+                    PETSc.Sys.Print(f"  predictor: extrapolated (|F| {f_pred:.3e} against {f_start:.3e} at the "
+                                    "last state)")
+                return None
+            u_n.copy(self.u)
+        finally:
+            u_n.destroy()
+        if self.contact.monitor:
+            PETSc.Sys.Print(f"  predictor: elastic trial (extrapolated |F| {f_pred:.3e} >= {f_start:.3e})")
+        return self._elastic_trial(snes)
 
     def _elastic_trial(self, snes):
         """Move self.u to the step's elastic trial: the load increment carried with every closed face stuck and
@@ -461,6 +511,8 @@ class Problem:
         for _, g, lift in self.lifts:
             g.destroy()
             lift.destroy()
+        if self.previous is not None:
+            self.previous[1].destroy()
         for name in ("is_u", "is_lm", "u_nullspace"):
             if hasattr(self, name):
                 getattr(self, name).destroy()
