@@ -15,7 +15,7 @@ from petsc4py import PETSc
 
 from ..effects import event_total, logged
 from ..faults import contact as ct
-from .setup import apply_solver_defaults, rigid_body_modes
+from .setup import apply_solver_defaults, is_direct, rigid_body_modes
 
 
 def factorizations():
@@ -80,6 +80,8 @@ class Problem:
         self._dp_interval = None
         self._jacobian_key = None       # faces' states of the assembled J while it depends on nothing else
         self._trial = None              # faces' states of a step's elastic trial while it is solved
+        self._reuse_factors = False     # a direct PC under GMRES: keep the factors while no state changes
+        self._factor_states = None      # faces' states of the Jacobian last factored
         self.t_now = 0.0                # time of the converged state in self.u
         self.previous = None            # (time, state) converged before self.u: the predictor's history
         self.n_jacobians = 0             # interface Jacobians assembled (a configuration seen before is kept)
@@ -308,6 +310,18 @@ class Problem:
             J.assemble()
             self._jacobian_key = None if varies else state
             self.n_jacobians += 1
+            if self._reuse_factors:
+                # the faces' states of the factorisation: only slipping faces' values moved, and the old
+                # factors precondition GMRES on the new Jacobian (a few iterations); a state change refactors.
+                # Calibrated Queretaro at size factor 2: 18 factorisations and 59 Krylov iterations instead
+                # of 25 and 29 for the same 29 Newton iterations
+                fs = self._factor_states
+                keep = fs is not None and len(fs) == len(state) and np.array_equal(fs, state)
+                keep = self.comm.tompi4py().allreduce(keep, op=MPI.LAND)
+                snes.getKSP().getPC().setReusePreconditioner(keep)      # for the trial's own solve
+                _set_lag_preconditioner(snes, -1 if keep else -2)       # SNES sets the PC's flag after this
+                if not keep:
+                    self._factor_states = np.array(state)
             if P.handle != J.handle:
                 J.copy(P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
                 f.add_augmentation(P, state)
@@ -346,6 +360,7 @@ class Problem:
             self._atol_user = PETSc.Options().hasName("snes_atol")
         snes.setUp()
         if self.faults is not None:
+            self._reuse_factors = is_direct() and snes.getKSP().getType() != "preonly"
             self.faults.begin_step(self.local_array(self.u))
             self.jacobian(snes, self.u, self.J, self.P)
         ksp = snes.getKSP()
@@ -516,6 +531,25 @@ class Problem:
         for name in ("is_u", "is_lm", "u_nullspace"):
             if hasattr(self, name):
                 getattr(self, name).destroy()
+
+
+def _set_lag_preconditioner(snes, lag):
+    """SNESSetLagPreconditioner (petsc4py 3.18 has no binding for it)."""
+    if hasattr(snes, "setLagPreconditioner"):
+        return snes.setLagPreconditioner(lag)
+    import ctypes
+    global _LIBPETSC
+    if _LIBPETSC is None:
+        with open("/proc/self/maps") as fh:
+            path = next(line.split()[-1] for line in fh if "libpetsc" in line.split()[-1])
+        _LIBPETSC = ctypes.CDLL(path)
+        _LIBPETSC.SNESSetLagPreconditioner.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    err = _LIBPETSC.SNESSetLagPreconditioner(ctypes.c_void_p(snes.handle), lag)
+    if err:
+        raise RuntimeError(f"SNESSetLagPreconditioner returned {err}")
+
+
+_LIBPETSC = None
 
 
 def configure_fieldsplit(problem, pc):

@@ -78,10 +78,15 @@ def apply_solver_defaults(linear=False):
         set_default("pc_type", "lu")
         set_default("pc_factor_mat_solver_type", "mumps")
     if is_direct() and not opts.hasName("ksp_type"):
-        # one factorisation per Newton iteration whose Jacobian changed. Reusing it as GMRES's preconditioner
-        # for three iterations (-ksp_type gmres -snes_lag_preconditioner 3) was slower: calibrated Queretaro
-        # 216 s against 98 s, 160-320 MUMPS triangular solves per step at 0.14 s each on 2 ranks
-        set_default("ksp_type", "preonly")
+        if linear:
+            set_default("ksp_type", "preonly")
+        else:
+            # GMRES on the factorised Jacobian: one iteration after a factorisation, a few while the faces'
+            # states are those of the last one and its factors are kept (Problem.jacobian). Keeping them for
+            # a fixed number of Newton iterations whatever the states (-snes_lag_preconditioner 3) was slower:
+            # calibrated Queretaro 216 s against 98 s, 160-320 triangular solves per step at 0.14 s each
+            set_default("ksp_type", "gmres")
+            set_default("ksp_rtol", "1e-8")
     set_default("snes_rtol", "1e-10")
     set_default("snes_max_it", "50")
 
