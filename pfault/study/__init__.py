@@ -1,5 +1,6 @@
-"""Studies built on finished runs: figures of a run directory (``figures``) and the two case studies of
-Franceschini et al. (Proc. IAHS 372, 2015) against the paper (``casestudies``)."""
+"""Studies built on runs: figures of a run directory (``figures``), the two case studies of Franceschini et al.
+(Proc. IAHS 372, 2015) against the paper (``casestudies``), the contact solver's hard cases (``hard_cases``) and
+accuracy against cost on problems with a known answer (``accuracy``)."""
 
 import os
 
