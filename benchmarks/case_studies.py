@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Wuxi, Queretaro and the calibrated Queretaro at paper size on 2 ranks, against Franceschini et al. (2015).
 
-    .venv/bin/python benchmarks/case_studies.py [--no-run] [--cases wuxi,...] [--solver fieldsplit]
+    .venv/bin/python benchmarks/case_studies.py [--no-run] [--cases wuxi,...] [--solver iterative]
                                                 [--size-factor 3] [-- more pfault/PETSc options]
 
 Runs each case under mpirun (one at a time), makes its figures (runs/<run>/*.png) and rewrites

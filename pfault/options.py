@@ -119,7 +119,7 @@ SPECS = [
        "residual norm, stick/slip/open counts and how many faces changed state"),
     # solver
     _s("pfault_solver", "string", "", "", "solver options file: a name in config/solver (mumps, gamg, "
-       "fieldsplit) or a path; its options apply where not set by the scene or the command line"),
+       "iterative) or a path; its options apply where not set by the scene or the command line"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
     _s("pfault_geostatic_k0", "quantity", None, "", "ratio K0 >= 0 of horizontal to vertical effective stress "

@@ -26,6 +26,18 @@ class NotConverged(Exception):
     pass
 
 
+def _check_iterative_faults(fault_settings):
+    """The Schur fieldsplit eliminates each face's multipliers through the 3x3 blocks the traction-jump
+    stabilisation gives a stuck face (every rank reads the same settings, so every rank raises)."""
+    if PETSc.Options().getString("pc_type", "") != "fieldsplit":
+        return
+    for f in fault_settings:
+        if f.method == "lagrange" and not f.stabilization:
+            raise InputError(f"-pfault_fault_{f.name}_stabilization false: the fieldsplit solver eliminates the "
+                             "multipliers through the stabilisation's face blocks; keep the stabilisation or "
+                             "use -pfault_solver mumps")
+
+
 def _fmt_time(t):
     year = 365.25 * 86400.0
     if t >= 0.01 * year:
@@ -151,6 +163,7 @@ class Simulation:
         faults = None
         if self.effects.faults:
             from .faults.interface import FaultInterface
+            _check_iterative_faults(self.fault_settings)
             with logged("pfaultFaultSetup"):
                 faults = FaultInterface(self.mesh, self.dofmap, self.fault_settings, self.fault_topology,
                                         self.materials, constrained_local(self.mesh, self.dofmap),
@@ -436,6 +449,7 @@ class Simulation:
                      "fault_faces": int(len(self.fault_id)) if self.fault_settings else 0},
             "fields": list(self.dofmap.fields),
             "dofs": int(self.problem.u.getSize()),
+            "solver": self._solver_record(steps),
             "steps": steps,
             "max_subsidence_m": max([r["max_subsidence_m"] for r in last], default=0.0),
             "max_horizontal_displacement_m": max([r["max_horizontal_displacement_m"] for r in last], default=0.0),
@@ -456,6 +470,17 @@ class Simulation:
         if self.restart_dir:
             summary["restart"] = {"from": self.restart_dir, "step": self.restart_step}
         return summary
+
+    def _solver_record(self, steps):
+        """The linear solver and its iterations: Krylov iterations per Newton iteration over the run (each
+        step's own is in its record, ``ksp_per_newton``)."""
+        ksp = self.snes.getKSP() if hasattr(self, "snes") else None
+        newton = sum(r.get("newton_its", 0) for r in steps)
+        krylov = sum(r.get("ksp_its", 0) for r in steps)
+        return {"file": self.solver_file, "ksp_type": ksp.getType() if ksp else None,
+                "pc_type": ksp.getPC().getType() if ksp else None, "newton_its": int(newton),
+                "ksp_its": int(krylov), "ksp_per_newton": krylov / newton if newton else 0.0,
+                "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
 
     def _finish(self, steps, converged, stop):
         self.summary = self._summary(steps, converged, stop)

@@ -22,7 +22,7 @@ WHOLE = os.environ.get("PFAULT_STUDY_TEST", "") == "quick"
 if WHOLE:
     PROBLEMS = "mms,oedometer,theis,penny,two_blocks"
     OPTIONS = []
-    ELASTIC, FAULT = ("mumps", "gamg"), ("mumps", "fieldsplit")
+    ELASTIC, FAULT = ("mumps", "gamg"), ("mumps", "iterative")
 else:
     PROBLEMS = "mms,theis,penny,two_blocks"
     OPTIONS = ["--elastic-solvers", "mumps", "--fault-solvers", "mumps", "--rtols", "", "--penalty", "1,100"]

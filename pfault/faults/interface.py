@@ -24,7 +24,7 @@ from ..effects import logged
 from ..mesh.serial import TET_FACES
 from ..physics import elasticity as el
 from . import contact as ct
-from .stabilization import N_CONSTRAINED, stabilization_pattern, stabilization_rows
+from .stabilization import stabilization_pattern, stabilization_rows
 
 ADD = PETSc.InsertMode.ADD_VALUES
 
@@ -374,30 +374,13 @@ class FaultInterface:
             J.setValuesRCV(self.g_u[lag], self.g_lm[lag], np.zeros((n, 54)), addv=ADD)
             J.setValuesRCV(self.g_lm[lag], self.g_u[lag], np.zeros((n, 54)), addv=ADD)
             J.setValuesRCV(self.g_lm[lag], self.g_lm[lag], np.zeros((n, 9)), addv=ADD)
-        if self.nf:   # both sides' dofs of a face: penalty blocks, and the augmented preconditioner
-            J.setValuesRCV(self.g_u, self.g_u, np.zeros((self.nf, 324)), addv=ADD)
+        pen = np.nonzero(~self.lagrange)[0]
+        if len(pen):   # both sides' dofs of a penalty face
+            J.setValuesRCV(self.g_u[pen], self.g_u[pen], np.zeros((len(pen), 324)), addv=ADD)
 
     def stabilization_pattern(self):
         """(rows, cols) global index pairs of the stabilisation blocks in rows this rank owns."""
         return stabilization_pattern(self.pairs, self.pos, self.all_g_lm)
-
-    def add_augmentation(self, P, state):
-        """Add gamma B^T W B to the displacement block of the preconditioning matrix P (augmented Lagrangian):
-        the jump of every closed face is penalised with gamma = A E/h in its constrained directions (all three
-        when stuck, the normal one when slipping). It makes the displacement block nonsingular where a fault
-        cuts a body loose, so a Schur-complement fieldsplit applies; the Jacobian itself is unchanged."""
-        lag = np.nonzero(self.lagrange & (state != ct.OPEN))[0]
-        if not len(lag):
-            return
-        w = (np.arange(3)[None, :] < N_CONSTRAINED[state[lag]][:, None]).astype(float)
-        gamma = self.area[lag] * self.young[lag] / self.h[lag]
-        # face-average jump in the local frame: g_loc = R (1/3) sum sign_b u_b
-        RtWR = np.einsum("nji,nj,njk->nik", self.R[lag], w, self.R[lag]) * (gamma / 9.0)[:, None, None]
-        sign = self.sign.reshape(6, 3)[:, 0]
-        blk = sign[None, :, None, None, None] * sign[None, None, None, :, None] * RtWR[:, None, :, None, :]
-        mask = self.u_mask[lag]
-        blk = blk.reshape(len(lag), 18, 18) * mask[:, :, None] * mask[:, None, :]
-        P.setValuesRCV(self.g_u[lag], self.g_u[lag], blk.reshape(len(lag), 324), addv=ADD)
 
     # -- output -----------------------------------------------------------------------------------
     def face_fields(self, x_loc):

@@ -14,9 +14,6 @@ import numpy as np
 from ..physics import elasticity as el
 from . import contact as ct
 
-# constrained components per state (stick, slip, open)
-N_CONSTRAINED = np.array([3, 1, 0])
-
 # S as a fraction of the local compliance estimate. The stabilisation is a consistency error: a closed face
 # next to a face whose traction changed differently takes a jump S (dt_b - dt_a) / A, so near an opening front
 # the fault behaves as if held by springs of stiffness A / S. At the full estimate (fraction 1, S about 2.7

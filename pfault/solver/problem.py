@@ -63,12 +63,11 @@ class Problem:
         self.log_assembly.end()
         self.nullspace = rigid_body_modes(mesh, dofmap, self.dm)
         self.K.setNearNullSpace(self.nullspace)
-        self.J = self.P = self.K
+        self.J = self.K
         if faults is not None:
             self.J = self.K.duplicate(copy=True)
             self.J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
             self.J.setNearNullSpace(self.nullspace)
-            self.P = self.J
 
         self.u = self.dm.createGlobalVec()
         self.u.setName("displacement")
@@ -106,10 +105,10 @@ class Problem:
         K.assemble()
         if self.faults is None:
             return K
+        # rebuilt with the stabilisation's pattern and block size 3 (every point carries 3, 6 or 3k dofs: AMG
+        # reads the block size from the matrix)
         rows, cols = self.faults.stabilization_pattern()
-        if self.comm.tompi4py().allreduce(len(rows)) == 0:
-            return K
-        K1 = _extend_pattern(K, rows, cols)
+        K1 = _extend_pattern(K, rows, cols, bs=3)
         K.destroy()
         return K1
 
@@ -259,12 +258,10 @@ class Problem:
             self.faults.add_glued(A)
             A.assemble()
             self._jacobian_key = None
-            if self.P is not self.J:
-                A.copy(self.P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            elif not self.faults.jacobian_varies(np.full(self.faults.nf, ct.STICK)):
+            if not self.faults.jacobian_varies(np.full(self.faults.nf, ct.STICK)):
                 # the Jacobian of every face stuck: a first step that starts so keeps this factorisation
                 self._jacobian_key = np.full(self.faults.nf, ct.STICK)
-        ksp.setOperators(A, self.P if self.faults is not None else A)
+        ksp.setOperators(A, A)
         ksp.solve(self.f, ug)
 
     def _start_faults(self, sigma0):
@@ -322,10 +319,6 @@ class Problem:
                 _set_lag_preconditioner(snes, -1 if keep else -2)       # SNES sets the PC's flag after this
                 if not keep:
                     self._factor_states = np.array(state)
-            if P.handle != J.handle:
-                J.copy(P, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-                f.add_augmentation(P, state)
-                P.assemble()
         self.log_jacobian.end()
 
     def _monitor(self, snes, its, fnorm):
@@ -345,16 +338,11 @@ class Problem:
         snes.setDM(self.dm)
         snes.getKSP().setDMActive(False)
         snes.setFunction(self.residual, self.F)
-        snes.setJacobian(self.jacobian, self.J, self.P)
+        snes.setJacobian(self.jacobian, self.J, self.J)
         snes.setFromOptions()
+        configure_fieldsplit(self, snes.getKSP().getPC())
         if self.faults is not None:
             snes.setConvergenceHistory()
-            if configure_fieldsplit(self, snes.getKSP().getPC()):
-                # Schur-complement fieldsplit preconditions with the augmented matrix (nonsingular
-                # displacement block)
-                self.P = self.J.duplicate(copy=True)
-                self.P.setNearNullSpace(self.nullspace)
-                snes.setJacobian(self.jacobian, self.J, self.P)
             if self.contact.monitor:
                 snes.setMonitor(self._monitor)
             self._atol_user = PETSc.Options().hasName("snes_atol")
@@ -362,9 +350,9 @@ class Problem:
         if self.faults is not None:
             self._reuse_factors = is_direct() and snes.getKSP().getType() != "preonly"
             self.faults.begin_step(self.local_array(self.u))
-            self.jacobian(snes, self.u, self.J, self.P)
+            self.jacobian(snes, self.u, self.J, self.J)
         ksp = snes.getKSP()
-        ksp.setOperators(self.J, self.P)
+        ksp.setOperators(self.J, self.J)
         ksp.setUp()
         return snes
 
@@ -401,6 +389,7 @@ class Problem:
             rec["jacobians"] = int(self.n_jacobians - njac)
             rec["residual_history"] = history
             rec.update(self.faults.counts_by_state(self.local_array(self.u)))
+        rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
         if rec["converged"]:
             if start is not None:
                 self._set_previous(self.t_now, start)
@@ -453,9 +442,9 @@ class Problem:
         try:
             self.residual(snes, self.u, self.F)
             fnorm = self.F.norm()
-            self.jacobian(snes, self.u, self.J, self.P)
+            self.jacobian(snes, self.u, self.J, self.J)
             ksp = snes.getKSP()
-            ksp.setOperators(self.J, self.P)
+            ksp.setOperators(self.J, self.J)
             du = self.u.duplicate()
             ksp.solve(self.F, du)
             self.u.axpy(-1.0, du)
@@ -506,6 +495,7 @@ class Problem:
         rec = dict(rec)
         for key in ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians"):
             rec[key] = sum(r.get(key, 0) for r in tried)
+        rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
         rec["time_s"] = float(t)
         rec["substeps"] = 2 ** cuts
         rec["residual_history"] = [h for r in tried for h in r["residual_history"]]
@@ -520,7 +510,7 @@ class Problem:
         return sig - (self.asm.alpha * dp)[:, None, None] * np.eye(3)
 
     def destroy(self):
-        for obj in {id(o): o for o in (self.K, self.J, self.P, self.u, self.u_ref, self.f, self.F,
+        for obj in {id(o): o for o in (self.K, self.J, self.u, self.u_ref, self.f, self.F,
                                        self.nullspace)}.values():
             obj.destroy()
         for _, g, lift in self.lifts:
@@ -553,11 +543,37 @@ _LIBPETSC = None
 
 
 def configure_fieldsplit(problem, pc):
-    """Named splits for PCFIELDSPLIT (options -fieldsplit_displacement_*, -fieldsplit_lagrange_multiplier_fault_*)
-    with the rigid-body modes of the displacement block as its near-null space (for GAMG)."""
+    """Named splits for PCFIELDSPLIT: the fault multipliers first (options -fieldsplit_lagrange_multiplier_fault_*),
+    then the displacement (-fieldsplit_displacement_*), both with block size 3, the displacement with the
+    rigid-body modes as its near-null space.
+
+    With -pc_fieldsplit_type schur the multipliers are eliminated first and the displacement carries the Schur
+    complement K - B D^-1 C. Its "selfp" approximation with the exact 3x3 blocks of D per face
+    (-fieldsplit_displacement_mat_schur_complement_ainv_type blockdiag) is the elastic stiffness plus, across
+    every closed face, springs of stiffness A^2 / S_face in the directions the face's state constrains (S_face:
+    the face's traction-jump stabilisation, 1 % of the local compliance estimate, so about 100 times the local
+    stiffness): an augmented Lagrangian whose coefficient comes from the discretisation. It keeps the
+    displacement block nonsingular where a fault holds a body, and the outer iterations independent of the
+    mesh size (config/solver/iterative.opts). A stuck face without stabilisation has D = 0, which is why
+    pfault.simulation rejects that combination.
+
+    A scene without faults, or whose faults are all penalty faults, has no multiplier field: the whole unknown
+    is the displacement, and the PC becomes the displacement split's (its options, -fieldsplit_displacement_*)."""
     f = problem.faults
-    if pc.getType() != PETSc.PC.Type.FIELDSPLIT or not f.has_lagrange:
-        return False
+    if pc.getType() != PETSc.PC.Type.FIELDSPLIT:
+        return
+    if f is None or not f.has_lagrange:
+        prefix = pc.getOptionsPrefix() or ""
+        pc.setOptionsPrefix(prefix + "fieldsplit_displacement_")
+        pc.setFromOptions()     # (the prefix stays: a later KSPSetFromOptions must not bring back -pc_type)
+        # the multiplier split's options and the Schur complement's have nothing to act on here
+        opts = PETSc.Options()
+        for key in opts.getAll():
+            if key.startswith((prefix + "fieldsplit_lagrange_multiplier_fault_", prefix + "pc_fieldsplit_",
+                               prefix + "fieldsplit_displacement_ksp_",
+                               prefix + "fieldsplit_displacement_mat_schur")):
+                opts.getString(key, "")
+        return
     from ..fields import DISPLACEMENT, LAGRANGE
     loc = np.zeros(problem.dofmap.n_local)
     loc[f.lm_dofs[np.nonzero(f.lagrange)[0]].ravel()] = 1.0
@@ -568,7 +584,8 @@ def configure_fieldsplit(problem, pc):
     idx = np.arange(len(mark), dtype=PETSc.IntType) + start
     problem.is_u = PETSc.IS().createGeneral(idx[~mark], comm=problem.comm)
     problem.is_lm = PETSc.IS().createGeneral(idx[mark], comm=problem.comm)
-    problem.is_u.setBlockSize(1)
+    problem.is_u.setBlockSize(3)
+    problem.is_lm.setBlockSize(3)
     vecs = []
     for v in problem.nullspace.getVecs():
         sub = v.getSubVector(problem.is_u)
@@ -582,12 +599,12 @@ def configure_fieldsplit(problem, pc):
     for v in vecs:
         v.destroy()
     problem.is_u.compose("nearnullspace", problem.u_nullspace)
-    pc.setFieldSplitIS((DISPLACEMENT, problem.is_u), (LAGRANGE, problem.is_lm))
-    return True
+    pc.setFieldSplitIS((LAGRANGE, problem.is_lm), (DISPLACEMENT, problem.is_u))
 
 
-def _extend_pattern(K0, rows, cols):
-    """A new AIJ matrix with K0's values and pattern plus explicit zeros at (rows, cols) (owned rows)."""
+def _extend_pattern(K0, rows, cols, bs=1):
+    """A new AIJ matrix (block size bs) with K0's values and pattern plus explicit zeros at (rows, cols) (owned
+    rows)."""
     rstart, rend = K0.getOwnershipRange()
     indptr, indices, values = K0.getValuesCSR()
     nrows = rend - rstart
@@ -605,7 +622,7 @@ def _extend_pattern(K0, rows, cols):
     r_u = (uniq // ncols).astype(np.int64)
     c_u = (uniq % ncols).astype(PETSc.IntType)
     ptr = np.concatenate([[0], np.cumsum(np.bincount(r_u, minlength=nrows))]).astype(PETSc.IntType)
-    K = PETSc.Mat().createAIJ(size=K0.getSizes(), csr=(ptr, c_u, vals), comm=K0.getComm())
+    K = PETSc.Mat().createAIJ(size=K0.getSizes(), bsize=bs, csr=(ptr, c_u, vals), comm=K0.getComm())
     K.setLGMap(*K0.getLGMap())
     K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     K.assemble()

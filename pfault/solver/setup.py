@@ -41,18 +41,28 @@ def find_solver_file(name, scene_file=""):
 
 
 def apply_solver_file(name, scene_file=""):
-    """Options of a solver file, each set only where the user has not set it."""
+    """Options of a solver file, each set only where the user has not set it. A preconditioner the user
+    chose (-pc_type, or -PREFIX_pc_type of a sub-solver such as -fieldsplit_displacement_pc_type) does not
+    inherit the file's settings of the preconditioner it replaces: the file's options under that prefix that
+    configure a preconditioner (pc_*, mg_*, the MUMPS options, a fieldsplit's sub-solvers) are dropped; its
+    Krylov options stay (a Krylov method chosen alone keeps the file's preconditioner)."""
     if not name:
         return None
     path = find_solver_file(name, scene_file)
     opts = PETSc.Options()
-    user_chose_pc = opts.hasName("pc_type")     # (a Krylov method chosen alone keeps the file's preconditioner)
-    for key, value in read_options_file(path):
-        if user_chose_pc and (key.startswith("pc_") or key.startswith("mat_mumps") or key.startswith("mg_")):
-            continue  # a solver chosen explicitly does not inherit another solver's settings
+    entries = read_options_file(path)
+    chosen = [key[:-len("pc_type")] for key, _ in entries if key.endswith("pc_type") and opts.hasName(key)]
+    if opts.hasName("pc_type"):
+        chosen.append("")
+    for key, value in entries:
+        if any(key.startswith(p) and key[len(p):].startswith(_PC_KEYS) for p in chosen):
+            continue
         if not opts.hasName(key):
             opts.setValue(key, "" if value is None else value)
     return path
+
+
+_PC_KEYS = ("pc_", "mat_mumps", "mg_", "fieldsplit_", "sub_")
 
 
 def is_direct():

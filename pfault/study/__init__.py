@@ -7,8 +7,12 @@ import os
 
 def mpi_env(oversubscribe=False):
     """Environment for running pfault under Open MPI here: one BLAS thread per rank, Open MPI allowed as root,
-    optionally more ranks than cores (the same settings as scripts/env.sh)."""
+    optionally more ranks than cores (the same settings as scripts/env.sh), and this checkout of pfault first
+    on the import path."""
     env = dict(os.environ)
+    # the subprocesses import this pfault (not another checkout an editable install may point to)
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
     env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", OMPI_MCA_btl_vader_single_copy_mechanism="none")
     if oversubscribe:
         env["OMPI_MCA_rmaps_base_oversubscribe"] = "1"

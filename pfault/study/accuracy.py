@@ -1,7 +1,7 @@
 """Accuracy against cost: error, unknowns, wall time and iterations of pfault on problems with a known answer.
 
     .venv/bin/python benchmarks/accuracy_cost.py [--quick] [--problems mms,theis,...] [--ranks 2]
-        [--fault-solvers mumps,fieldsplit] [--elastic-solvers mumps,gamg] [--rtols 1e-4,1e-6]
+        [--fault-solvers mumps,iterative] [--elastic-solvers mumps,gamg] [--rtols 1e-4,1e-6]
         [--penalty 0.1,1,10,100] [--out runs/accuracy_cost] [--report-only]
 
 Problems (the error is relative, in the quantity named; ``h`` is the size measure the rates use):
@@ -109,7 +109,7 @@ class Study:
     """Settings shared by every problem."""
     out: str
     ranks: int = 2
-    fault_solvers: tuple = ("mumps", "fieldsplit")
+    fault_solvers: tuple = ("mumps", "iterative")
     elastic_solvers: tuple = ("mumps", "gamg")
     rtols: tuple = (1e-4, 1e-6)
     penalty: tuple = (1.0, 100.0)
@@ -730,7 +730,7 @@ def parse(argv):
     p.add_argument("--quick", action="store_true", help="reduced ladders (under 5 minutes on 2 idle cores)")
     p.add_argument("--problems", type=names, default=PROBLEMS, help=f"comma list out of {','.join(PROBLEMS)}")
     p.add_argument("--ranks", type=int, default=2)
-    p.add_argument("--fault-solvers", type=names, default=("mumps", "fieldsplit"),
+    p.add_argument("--fault-solvers", type=names, default=("mumps", "iterative"),
                    help="solvers of the fault scenes (config/solver/NAME.opts); the first one also runs the "
                         "tolerance ladder")
     p.add_argument("--elastic-solvers", type=names, default=("mumps", "gamg"), help="solvers of fault-free scenes")

@@ -2,7 +2,7 @@
 
     .venv/bin/python -m pfault.study.casestudies                 # run all, figures, rewrite runs/README.md
     .venv/bin/python -m pfault.study.casestudies --no-run        # figures + README from the existing runs
-    .venv/bin/python -m pfault.study.casestudies --cases wuxi --solver fieldsplit   # a solver variant
+    .venv/bin/python -m pfault.study.casestudies --cases wuxi --solver iterative   # a solver variant
     .venv/bin/python -m pfault.study.casestudies --cases wuxi --tag lag -- -snes_lag_preconditioner 100
 
 Each case runs as ``mpirun -n RANKS python -m pfault config/<case>.opts -pfault_output_dir runs/<run>
@@ -732,7 +732,7 @@ def write_readme(results, path, regenerate_cmd):
         "```",
         "",
         "`--no-run` rebuilds the figures and this file from the run directories already here; `--cases`, "
-        "`--solver fieldsplit`, `--size-factor 3`, `--tag NAME -- -option value ...` make variant runs "
+        "`--solver iterative`, `--size-factor 3`, `--tag NAME -- -option value ...` make variant runs "
         "(`runs/<case>-<solver|tag>[-f<factor>]`), listed next to the default ones.",
         "",
         "Case studies of Franceschini, Teatini, Janna, Ferronato, Gambolati, Ye and Carreón-Freyre, *Modelling "
