@@ -15,7 +15,11 @@ TIMEOUT = 600
 
 
 def mpi_env():
-    return study_mpi_env(oversubscribe=True)
+    """Also puts this checkout first on the path: a script in tests/scripts (whose own folder is first on its
+    path) imports the pfault of this checkout, not the one the virtual environment has installed."""
+    env = study_mpi_env(oversubscribe=True)
+    env["PYTHONPATH"] = os.pathsep.join([REPO] + [p for p in [env.get("PYTHONPATH")] if p])
+    return env
 
 
 def command(args, ranks):
