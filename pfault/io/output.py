@@ -1,4 +1,5 @@
-"""Run output written by rank 0 in the serial (partition-independent) numbering.
+"""Run output in the serial (partition-independent) numbering, written by rank 0 (on more than one rank the
+per-step datasets of the volume fields and the faults are written by every rank, pfault.io.parallel).
 
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
 - ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
@@ -171,8 +172,17 @@ class XdmfSeries:
                 ds = grp.create_dataset(key, data=np.asarray(value))
                 ds.attrs["center"] = center
         self.h5.flush()
-        self.entries.append(step_entry(grp))
+        self.append(step_entry(grp))
+
+    def append(self, entry):
+        """A step was written into ``NAME.h5`` (here or by pfault.io.parallel.ParallelSeries): list it."""
+        self.entries.append(entry)
         self._write_xdmf()
+
+    def release(self):
+        """Close ``NAME.h5`` so that every rank may open it to write the following steps (ParallelSeries);
+        this object goes on listing them (``append``)."""
+        self.close()
 
     def copy_steps(self, h5_path, last_step):
         """Copy the steps up to ``last_step`` of another run's series (same mesh) into this one (restart)."""
@@ -240,7 +250,8 @@ def staging_dir(path):
 
 
 class RunWriter:
-    """Writes a run's directory; every method is called on rank 0 only.
+    """Writes a run's directory; every method is called on rank 0 only (the series it releases are written
+    by every rank, pfault.io.parallel).
 
     ``path`` is the output directory; the files go to a staging sibling until ``commit`` puts them in place
     (``self.dir`` is where they are now)."""
@@ -276,6 +287,17 @@ class RunWriter:
 
     def write_surface_step(self, step, t, point_data, cell_data):
         self.series["surface"].write_step(step, t, point_data, cell_data)
+
+    def release(self, names):
+        """The series ``names`` are written by every rank from now on (pfault.io.parallel): their HDF5 files
+        are closed here and their steps come through ``add_steps``."""
+        for name in names:
+            self.series[name].release()
+
+    def add_steps(self, entries):
+        """Steps written by every rank into released series: {series name: XDMF entry}."""
+        for name, entry in entries.items():
+            self.series[name].append(entry)
 
     def continue_from(self, run_dir, last_step):
         """Restart: the output steps up to ``last_step`` of the run in ``run_dir`` start this run's series, and
