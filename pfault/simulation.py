@@ -423,6 +423,7 @@ class Simulation:
             "final_subsidence_m": last[-1]["max_subsidence_m"] if last else 0.0,
             "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
+            "memory_peak_mib": self._memory_peak_mib(),
             "converged": bool(converged),
             "effects": self.costs.record(self.effects, len([r for r in steps if not r.get("initial")])),
             # a run in progress, or one killed before it could say how it ended, reads running: true
@@ -437,6 +438,13 @@ class Simulation:
         if self.restart_dir:
             summary["restart"] = {"from": self.restart_dir, "step": self.restart_step}
         return summary
+
+    def _memory_peak_mib(self):
+        """The largest resident set size of each rank's process so far, in MiB (a list in rank order; collective)."""
+        import resource
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux, bytes on macOS
+        mib = peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
+        return [round(m, 1) for m in self.comm.tompi4py().allgather(mib)]
 
     def _finish(self, steps, converged, stop):
         if getattr(self, "output", None) is not None:

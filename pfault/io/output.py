@@ -4,7 +4,8 @@ per-step datasets of the volume fields and the faults are written by every rank,
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
 - ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
 - ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash
-- ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima and wall times
+- ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima, wall times and each rank's
+  peak memory
 - ``checkpoint.h5``: the state after the last completed step (pfault.io.checkpoint)
 
 Every completed step is durable: its HDF5 datasets are flushed, then the XDMF files and summary.json are
