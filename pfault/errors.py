@@ -7,7 +7,8 @@ Exit codes (also in pfault/cli.py and README.md)::
     2 usage                     5 out of memory                SIGTERM, SIGINT or SIGUSR1)
 
 Errors that depend only on the options are raised by every rank together. Work done on one rank (the
-serial mesh, output) runs through ``run_on_root``, which shares any exception it raises with every rank.
+serial mesh, output) runs through ``run_on_root``, which shares any exception it raises with every rank;
+work every rank does together (output written in parallel) through ``run_on_all``.
 What is left, an exception on some ranks only, is settled by ``RunGuard.settle``: if every rank reaches
 it within a few seconds the ranks end together; otherwise the failing rank prints its line and aborts
 the MPI job with the exit code (the others are waiting in a collective call and cannot be reached).
@@ -52,6 +53,7 @@ def exit_code_table():
 
 PETSC_ERR_MEM = 55           # PETSc's error code for a failed allocation
 SETTLE_SECONDS = 3.0         # how long a failing rank waits for the others before it aborts the job
+SHARE_SECONDS = 60.0         # how long a rank that failed in work done by all waits for the others to finish it
 
 
 class PfaultError(Exception):
@@ -181,6 +183,42 @@ def run_on_root(comm, func, *args, **kwargs):
         packed = mpicomm.bcast(packed, root=0)
     if packed is not None:
         raise _unpack(packed)
+    return result
+
+
+def run_on_all(comm, func, *args, wait=SHARE_SECONDS):
+    """Run ``func`` on every rank and raise an exception any rank raised on every rank (the lowest failing
+    rank's, as the same PfaultError); returns func's result. For work all ranks do together (output written
+    in parallel), between collective calls: every rank gets here after its part.
+
+    A rank whose func raised waits at most ``wait`` seconds for the others to get here: when they do not
+    (they are stuck in a collective call it left), it raises alone and ``RunGuard.settle`` aborts the job."""
+    from mpi4py import MPI
+    import numpy as np
+    mpicomm = _mpi(comm)
+    result, packed, error = None, None, None
+    try:
+        result = func(*args)
+    except Exception as exc:  # noqa: BLE001  (every exception is shared, then raised again)
+        error = exc
+        packed = _pack(as_pfault_error(exc))
+    if mpicomm.size == 1:
+        if error is not None:
+            raise _unpack(packed)
+        return result
+    failed = np.array([error is not None], dtype=np.int32)
+    any_failed = np.zeros(1, dtype=np.int32)
+    request = mpicomm.Iallreduce(failed, any_failed, op=MPI.MAX)
+    if error is None:
+        request.Wait()
+    else:
+        deadline = time.monotonic() + wait
+        while not request.Test():
+            if time.monotonic() > deadline:
+                raise error
+            time.sleep(0.01)
+    if any_failed[0]:
+        raise _unpack(next(p for p in mpicomm.allgather(packed) if p is not None))
     return result
 
 

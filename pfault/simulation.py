@@ -218,47 +218,16 @@ class Simulation:
     def _output(self, step, t, u_rel_local, initial=False):
         """Write one output step (fields, fault, land surface); returns the hazard maxima of the land surface
         (every rank)."""
+        from .io.steps import LocalStep
         p = self.problem
         both = np.concatenate([u_rel_local[self.dofmap.vertex_dofs(0)], u_rel_local[self.dofmap.vertex_dofs(1)]],
                               axis=1)
-        pts = distributed.gather_vertex_values(self.mesh, both)
         u_total = p.local_array(p.u_ref if initial else p.u)
         dp = p.cell_dp(t) if (p.drawdown.active and not initial) else np.zeros(len(self.mesh.cells))
         sig = p.cell_total_stress(u_total, dp).reshape(-1, 9)
-        cells = distributed.gather_cell_values(self.mesh, np.column_stack([dp, sig]))
         faults = self._fault_fields(u_total, u_rel_local) if self.fault_settings else None
-        head = None
-        if self.flow is not None:
-            head = distributed.gather_vertex_values(self.mesh, self.flow.vertex_head().reshape(-1, 1))
-
-        def write():
-            u = pts[:, :3]
-            if self.split is not None:
-                u = np.concatenate([u, pts[self.split.split_vertices, 3:]])
-            point_data = {"displacement": u}
-            if head is not None:
-                hh = head[:, 0]
-                if self.split is not None:
-                    hh = np.concatenate([hh, hh[self.split.split_vertices]])
-                point_data["head_change"] = hh
-            self.writer.write_step(step, t, point_data, {"pore_pressure_change": cells[:, 0],
-                                                         "stress": cells[:, 1:10]})
-            if faults is not None:
-                self.writer.write_fault_step(step, t, faults)
-            return self._surface_output(step, t, u)
-        maxima = run_on_root(self.comm, write)      # a failure to write ends every rank
-        return self.comm.tompi4py().bcast(maxima, root=0)
-
-    def _surface_output(self, step, t, u):
-        """Land-surface fields of one output step (rank 0): displacement and the earth-fissure hazard fields;
-        returns their maxima and where they are."""
-        from .io import hazard
-        surf = self.surface
-        if surf is None:
-            return None
-        fields = hazard.surface_fields(surf.points, surf.triangles, u[surf.vertices])
-        self.writer.write_surface_step(step, t, {"displacement": u[surf.vertices]}, fields)
-        return hazard.maxima(surf.points, surf.triangles, fields)
+        head = None if self.flow is None else self.flow.vertex_head()
+        return self.output.write(step, t, LocalStep(both, head, {"pore_pressure_change": dp, "stress": sig}, faults))
 
     def _open_output(self):
         """After the first solve (every solver option has been read by then): reject unused options, then
@@ -273,10 +242,26 @@ class Simulation:
         stage = PETSc.Log.Stage("Output")
         stage.push()
         self.writer = run_on_root(self.comm, self._create_writer)
+        self.output = self._step_output(self.writer)
         if not self.restart_dir:
             self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
         stage.pop()
         self.wall["output"] += time.perf_counter() - t0
+
+    def _step_output(self, writer, parallel=None):
+        """The StepOutput of this run's writer (every rank); ``parallel``: whether the volume and fault fields
+        are written by every rank (default: where h5py can, pfault.io.parallel.available)."""
+        from .io import parallel as par
+        from .io.steps import StepOutput
+        if parallel is None:
+            parallel = par.available(self.comm)
+        mpi = self.comm.tompi4py()
+        split = mpi.bcast(self.split.split_vertices if self.comm.rank == 0 and self.split is not None else None)
+        faults = self.problem.faults if self.fault_settings else None
+        return StepOutput(self.comm, self.mesh, writer, np.zeros(0, np.int64) if split is None else split,
+                          faces=None if faults is None else faults.face,
+                          fault_id=None if faults is None else self.fault_id,
+                          surface=self.surface if self.comm.rank == 0 else None, parallel=parallel)
 
     def _create_writer(self):
         from .io import hazard
@@ -302,18 +287,14 @@ class Simulation:
         return writer
 
     def _fault_fields(self, u_total, u_rel):
-        """Per fault face (serial order, on every rank): tractions from the total state, jumps relative to the
-        initial state."""
+        """Per fault face this rank owns: tractions from the total state, jumps relative to the initial state."""
         fs = self.problem.faults
         t_loc, _, t_glob, _, state = fs.face_fields(u_total)
         g, gl = fs.jumps(u_rel)
-        slip = g - gl[:, :1] * fs.normal
-        data = np.column_stack([t_loc[:, 0], t_glob - t_loc[:, :1] * fs.normal, gl[:, 0], slip,
-                                np.linalg.norm(gl[:, 1:], axis=1), state, fs.effective(t_loc)[:, 0]])
-        allf = fs.gather_faces(data)
-        return {"traction_normal": allf[:, 0], "traction_shear": allf[:, 1:4], "opening": allf[:, 4],
-                "slip": allf[:, 5:8], "slip_magnitude": allf[:, 8], "state": allf[:, 9].astype(np.int64),
-                "traction_normal_effective": allf[:, 10]}
+        return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.normal,
+                "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.normal,
+                "slip_magnitude": np.linalg.norm(gl[:, 1:], axis=1), "state": np.asarray(state, dtype=np.int64),
+                "traction_normal_effective": fs.effective(t_loc)[:, 0]}
 
     def _fault_figures(self, u_rel_local):
         fs = self.problem.faults
@@ -456,6 +437,7 @@ class Simulation:
             "final_subsidence_m": last[-1]["max_subsidence_m"] if last else 0.0,
             "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
+            "memory_peak_mib": self._memory_peak_mib(),
             "converged": bool(converged),
             "effects": self.costs.record(self.effects, len([r for r in steps if not r.get("initial")])),
             # a run in progress, or one killed before it could say how it ended, reads running: true
@@ -482,7 +464,16 @@ class Simulation:
                 "ksp_its": int(krylov), "ksp_per_newton": krylov / newton if newton else 0.0,
                 "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
 
+    def _memory_peak_mib(self):
+        """The largest resident set size of each rank's process so far, in MiB (a list in rank order; collective)."""
+        import resource
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux, bytes on macOS
+        mib = peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
+        return [round(m, 1) for m in self.comm.tompi4py().allgather(mib)]
+
     def _finish(self, steps, converged, stop):
+        if getattr(self, "output", None) is not None:
+            self.output.close()
         self.summary = self._summary(steps, converged, stop)
         return self.summary
 
@@ -515,6 +506,11 @@ class Simulation:
             pass
 
     def destroy(self):
+        if getattr(self, "output", None) is not None:
+            try:
+                self.output.close()       # collective: every rank destroys the simulation after a failure
+            except Exception:  # noqa: BLE001  (best effort: the run has failed already)
+                pass
         if self.comm.rank == 0 and getattr(self, "writer", None) is not None:
             self.writer.abandon()         # nothing happens to a run directory already in place
         if hasattr(self, "snes"):

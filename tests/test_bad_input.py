@@ -218,6 +218,10 @@ CASES = [
     Case("disk_full_during_run", inject("disk_full", 0, 3), 4,
          "cannot write fields.h5: No space left on device; free space on that disk or choose another "
          "-pfault_output_dir", "partial"),
+    # on 2 ranks the fields are written by every rank: a failure on rank 1 alone ends every rank together
+    Case("disk_full_on_one_rank_during_run", inject("disk_full", 1, 3), 4,
+         "cannot write fields.h5: No space left on device; free space on that disk or choose another "
+         "-pfault_output_dir", "partial"),
 ]
 
 

@@ -32,6 +32,15 @@ def test_one_and_two_ranks_agree(demo_runs):
     assert np.linalg.norm(s1c - s2c) <= 1e-10 * np.linalg.norm(s1c)
 
 
+def test_summary_records_the_peak_memory_of_every_rank(demo_runs):
+    """memory_peak_mib: one entry per rank, in MiB (a Python process with PETSc takes tens of MiB at least; a
+    value in KiB or bytes would be far above the upper bound)."""
+    for ranks in (1, 2):
+        mem = demo_runs[ranks]["memory_peak_mib"]
+        assert isinstance(mem, list) and len(mem) == ranks, mem
+        assert all(20.0 < m < 65536.0 for m in mem), mem
+
+
 def test_geostatic_start_does_not_change_the_drawdown_response(demo_runs, tmp_path):
     _, s = run_scene("config/demo.opts", tmp_path, ranks=2, extra=SMALL + ["-pfault_geostatic", "false"])
     ref = demo_runs[2]

@@ -1,9 +1,11 @@
-"""Run output written by rank 0 in the serial (partition-independent) numbering.
+"""Run output in the serial (partition-independent) numbering, written by rank 0 (on more than one rank the
+per-step datasets of the volume fields and the faults are written by every rank, pfault.io.parallel).
 
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
 - ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
 - ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash
-- ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima and wall times
+- ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima, wall times and each rank's
+  peak memory
 - ``checkpoint.h5``: the state after the last completed step (pfault.io.checkpoint)
 
 Every completed step is durable: its HDF5 datasets are flushed, then the XDMF files and summary.json are
@@ -92,35 +94,74 @@ def open_h5(path, mode):
 _TOPOLOGY = {4: "Tetrahedron", 3: "Triangle"}
 
 
-def _data_item(h5name, path, arr):
-    arr = np.asarray(arr)
-    kind = "Int" if np.issubdtype(arr.dtype, np.integer) else "Float"
-    dims = " ".join(str(d) for d in arr.shape)
-    return (f'<DataItem DataType="{kind}" Dimensions="{dims}" Format="HDF" Precision="{arr.dtype.itemsize}">'
+def describe(arr):
+    """(shape, dtype) of an array or dataset: what the XDMF file says about it (nothing is read)."""
+    return tuple(arr.shape), np.dtype(arr.dtype)
+
+
+def _data_item(h5name, path, desc):
+    shape, dtype = desc
+    kind = "Int" if np.issubdtype(dtype, np.integer) else "Float"
+    dims = " ".join(str(d) for d in shape)
+    return (f'<DataItem DataType="{kind}" Dimensions="{dims}" Format="HDF" Precision="{dtype.itemsize}">'
             f"{h5name}:{path}</DataItem>")
 
 
-def _attribute_type(arr):
-    if arr.ndim == 1:
+def _attribute_type(shape):
+    if len(shape) == 1:
         return "Scalar"
-    return {3: "Vector", 9: "Tensor"}.get(arr.shape[1], "Matrix")
+    return {3: "Vector", 9: "Tensor"}.get(shape[1], "Matrix")
+
+
+def write_xdmf(directory, name, mesh, entries):
+    """``NAME.xdmf``: the mesh (``mesh``: descriptions of /mesh/points and /mesh/cells) and the steps in
+    ``entries`` [(group path, time, [(dataset name, center, description)])], from what was written, without
+    reading the HDF5 file back."""
+    h5 = name + ".h5"
+    points, cells = mesh
+    lines = ['<?xml version="1.0"?>',
+             '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">', "  <Domain>",
+             '    <Grid Name="mesh" GridType="Uniform">',
+             f'      <Geometry GeometryType="XYZ">{_data_item(h5, "/mesh/points", points)}</Geometry>',
+             f'      <Topology TopologyType="{_TOPOLOGY[cells[0][1]]}" NumberOfElements="{cells[0][0]}">'
+             f'{_data_item(h5, "/mesh/cells", cells)}</Topology>',
+             "    </Grid>",
+             '    <Grid Name="TimeSeries" GridType="Collection" CollectionType="Temporal">']
+    ptr = 'xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or self::Geometry])'
+    for path, t, fields in entries:
+        lines.append(f'      <Grid Name="step {int(path.rsplit("/", 1)[-1])}" GridType="Uniform">')
+        lines.append(f'        <xi:include xpointer="{ptr}"/>')
+        lines.append(f'        <Time Value="{t!r}"/>')
+        for key, center, desc in fields:
+            lines.append(f'        <Attribute Name="{key}" AttributeType="{_attribute_type(desc[0])}" '
+                         f'Center="{center}">{_data_item(h5, f"{path}/{key}", desc)}</Attribute>')
+        lines.append("      </Grid>")
+    lines += ["    </Grid>", "  </Domain>", "</Xdmf>", ""]
+    replace_text(os.path.join(directory, name + ".xdmf"), "\n".join(lines))
+
+
+def step_entry(grp):
+    """The XDMF entry of a written step group."""
+    return grp.name, float(grp.attrs["time"]), [(k, ds.attrs["center"], describe(ds)) for k, ds in grp.items()]
 
 
 class XdmfSeries:
     """One time series: ``NAME.h5`` holds the mesh (``/mesh``) and one group per written step
     (``/steps/NNNNNN``, attributes ``step`` and ``time``; datasets with attribute ``center`` Node or Cell);
     ``NAME.xdmf`` lists the steps written so far in the layout of meshio's TimeSeriesWriter (readable by
-    meshio.xdmf.TimeSeriesReader and ParaView). Rank 0 only."""
+    meshio.xdmf.TimeSeriesReader and ParaView). Rank 0 only (pfault.io.parallel.ParallelSeries continues one
+    on every rank)."""
 
     def __init__(self, directory, name, points, cells):
         self.directory, self.name = directory, name
         self.h5name = name + ".h5"
         self.h5 = open_h5(os.path.join(directory, self.h5name), "w")
         mesh = self.h5.create_group("mesh")
-        mesh.create_dataset("points", data=np.asarray(points, dtype=np.float64))
-        mesh.create_dataset("cells", data=np.asarray(cells, dtype=np.int64))
+        points = mesh.create_dataset("points", data=np.asarray(points, dtype=np.float64))
+        cells = mesh.create_dataset("cells", data=np.asarray(cells, dtype=np.int64))
+        self.mesh = describe(points), describe(cells)
         self.n_points, self.n_cells = len(points), len(cells)
-        self.entries = []                 # (group path, time, [(name, center, array shape/dtype)])
+        self.entries = []                 # (group path, time, [(name, center, (shape, dtype))])
         self.h5.flush()
         self._write_xdmf()
 
@@ -132,12 +173,17 @@ class XdmfSeries:
                 ds = grp.create_dataset(key, data=np.asarray(value))
                 ds.attrs["center"] = center
         self.h5.flush()
-        self._add_entry(grp)
+        self.append(step_entry(grp))
+
+    def append(self, entry):
+        """A step was written into ``NAME.h5`` (here or by pfault.io.parallel.ParallelSeries): list it."""
+        self.entries.append(entry)
         self._write_xdmf()
 
-    def _add_entry(self, grp):
-        fields = [(k, ds.attrs["center"], ds) for k, ds in grp.items()]
-        self.entries.append((grp.name, float(grp.attrs["time"]), fields))
+    def release(self):
+        """Close ``NAME.h5`` so that every rank may open it to write the following steps (ParallelSeries);
+        this object goes on listing them (``append``)."""
+        self.close()
 
     def copy_steps(self, h5_path, last_step):
         """Copy the steps up to ``last_step`` of another run's series (same mesh) into this one (restart)."""
@@ -147,33 +193,12 @@ class XdmfSeries:
             for key in sorted(old.get("steps", {})):
                 if int(old["steps"][key].attrs["step"]) <= last_step:
                     old.copy(old["steps"][key], self.h5.require_group("steps"), name=key)
-                    self._add_entry(self.h5["steps"][key])
+                    self.entries.append(step_entry(self.h5["steps"][key]))
         self.h5.flush()
         self._write_xdmf()
 
     def _write_xdmf(self):
-        h5 = self.h5name
-        mesh = self.h5["mesh"]
-        npe = mesh["cells"].shape[1]
-        lines = ['<?xml version="1.0"?>',
-                 '<Xdmf Version="3.0" xmlns:xi="http://www.w3.org/2001/XInclude">', "  <Domain>",
-                 '    <Grid Name="mesh" GridType="Uniform">',
-                 f'      <Geometry GeometryType="XYZ">{_data_item(h5, "/mesh/points", mesh["points"])}</Geometry>',
-                 f'      <Topology TopologyType="{_TOPOLOGY[npe]}" NumberOfElements="{self.n_cells}">'
-                 f'{_data_item(h5, "/mesh/cells", mesh["cells"])}</Topology>',
-                 "    </Grid>",
-                 '    <Grid Name="TimeSeries" GridType="Collection" CollectionType="Temporal">']
-        ptr = 'xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or self::Geometry])'
-        for path, t, fields in self.entries:
-            lines.append(f'      <Grid Name="step {int(path.rsplit("/", 1)[-1])}" GridType="Uniform">')
-            lines.append(f'        <xi:include xpointer="{ptr}"/>')
-            lines.append(f'        <Time Value="{t!r}"/>')
-            for key, center, ds in fields:
-                lines.append(f'        <Attribute Name="{key}" AttributeType="{_attribute_type(ds)}" '
-                             f'Center="{center}">{_data_item(h5, f"{path}/{key}", ds)}</Attribute>')
-            lines.append("      </Grid>")
-        lines += ["    </Grid>", "  </Domain>", "</Xdmf>", ""]
-        replace_text(os.path.join(self.directory, self.name + ".xdmf"), "\n".join(lines))
+        write_xdmf(self.directory, self.name, self.mesh, self.entries)
 
     def moved(self, directory):
         """The run directory was renamed (the open HDF5 file moves with it)."""
@@ -226,7 +251,8 @@ def staging_dir(path):
 
 
 class RunWriter:
-    """Writes a run's directory; every method is called on rank 0 only.
+    """Writes a run's directory; every method is called on rank 0 only (the series it releases are written
+    by every rank, pfault.io.parallel).
 
     ``path`` is the output directory; the files go to a staging sibling until ``commit`` puts them in place
     (``self.dir`` is where they are now)."""
@@ -262,6 +288,17 @@ class RunWriter:
 
     def write_surface_step(self, step, t, point_data, cell_data):
         self.series["surface"].write_step(step, t, point_data, cell_data)
+
+    def release(self, names):
+        """The series ``names`` are written by every rank from now on (pfault.io.parallel): their HDF5 files
+        are closed here and their steps come through ``add_steps``."""
+        for name in names:
+            self.series[name].release()
+
+    def add_steps(self, entries):
+        """Steps written by every rank into released series: {series name: XDMF entry}."""
+        for name, entry in entries.items():
+            self.series[name].append(entry)
 
     def continue_from(self, run_dir, last_step):
         """Restart: the output steps up to ``last_step`` of the run in ``run_dir`` start this run's series, and

@@ -4,8 +4,9 @@
 
 KIND: ``bug`` (a RuntimeError) or ``memory`` (a MemoryError), raised in time step STEP on rank RANK only;
 ``flow`` (the flow solver's FlowNotConverged) raised in time step STEP on every rank (RANK is ignored), as
-the flow KSP's collective verdict is; ``disk_full`` (OSError ENOSPC) when rank 0 writes the fields of time
-step STEP. Exits with pfault's exit code.
+the flow KSP's collective verdict is; ``disk_full`` (OSError ENOSPC) when rank RANK writes the fields of time
+step STEP (on rank 0 when they are gathered there, on that rank when every rank writes its part,
+pfault.io.parallel). Exits with pfault's exit code.
 """
 
 import errno
@@ -23,10 +24,11 @@ from petsc4py import PETSc  # noqa: E402
 
 from pfault import cli  # noqa: E402
 from pfault.io.output import RunWriter  # noqa: E402
+from pfault.io.parallel import ParallelSeries  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 from pfault.solver.flow import FlowNotConverged  # noqa: E402
 
-solve, write_step = Simulation._solve, RunWriter.write_step
+solve, write_step, write_part = Simulation._solve, RunWriter.write_step, ParallelSeries._fill
 
 
 def faulty_solve(self, t, t_prev=0.0):
@@ -47,6 +49,15 @@ def faulty_write_step(self, number, t, point_data, cell_data):
     return write_step(self, number, t, point_data, cell_data)
 
 
+def faulty_write_part(datasets):
+    ds = datasets[0][0]
+    if ds.file.filename.endswith("fields.h5") and ds.parent.name == f"/steps/{step:06d}" and \
+            PETSc.COMM_WORLD.rank == rank:
+        raise OSError(errno.ENOSPC, "No space left on device", "fields.h5")
+    return write_part(datasets)
+
+
 Simulation._solve = faulty_solve
 RunWriter.write_step = faulty_write_step
+ParallelSeries._fill = staticmethod(faulty_write_part)
 sys.exit(cli.main(scene, argv))

@@ -1,0 +1,150 @@
+"""The output steps of a run, from each rank's values of its local mesh: the volume fields (``fields.h5``),
+the faults' per-face fields (``fault.h5``) and the land surface (``surface.h5``) with its earth-fissure hazard
+maxima.
+
+On more than one rank with h5py built with MPI, the volume and fault fields are written by every rank, each
+its own rows (pfault.io.parallel); otherwise they are gathered to rank 0 in the serial numbering and written
+there. The land-surface series and the hazard maxima are computed and written on rank 0 either way: the
+surface is 2-D and small, and only its vertices' displacements are gathered.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import run_on_root
+from ..mesh import distributed
+from . import hazard
+from .parallel import ParallelSeries, Rows
+
+
+@dataclass
+class LocalStep:
+    """One output step's values on this rank."""
+    displacement: np.ndarray        # (nv, 6) per local vertex: side 0, then the plus side of a split vertex
+    head: np.ndarray | None         # (nv,) head change (groundwater flow), or None
+    cells: dict                     # per local cell: {name: (nc, ...)}
+    faults: dict | None             # per fault face this rank owns (``faces`` of StepOutput): {name: (nf, ...)}
+
+
+class StepOutput:
+    """Writes output steps through ``writer`` (pfault.io.output.RunWriter, rank 0). ``split_vertices``: the
+    serial ids of the split fault vertices (sorted; the output mesh has a copy of each after the serial
+    vertices); ``faces``: the serial ids of the fault faces this rank owns and ``fault_id`` the fault of every
+    face (None without faults); ``surface``: the land surface (pfault.io.hazard.Surface, rank 0; None
+    elsewhere or when there is none). Every method is collective."""
+
+    def __init__(self, comm, mesh, writer, split_vertices, faces=None, fault_id=None, surface=None,
+                 parallel=False):
+        self.comm, self.mpi = comm, comm.tompi4py()
+        self.mesh, self.writer, self.surface = mesh, writer, surface
+        self.split_vertices, self.faces = np.asarray(split_vertices, dtype=np.int64), faces
+        self.parallel = bool(parallel)
+        self.n_faces = 0 if fault_id is None else len(fault_id)
+        self.series = {}
+        if not parallel:
+            return
+        n, nv = mesh.n_global_vertices, len(mesh.vert_serial)
+        own = np.flatnonzero(mesh.vert_owned)
+        plus = own[mesh.vert_sides[own] > 1]
+        self.vertices = Rows(np.concatenate([mesh.vert_serial[own],
+                                             n + np.searchsorted(split_vertices, mesh.vert_serial[plus])]),
+                             n + len(split_vertices), np.concatenate([own, nv + plus]))
+        self.cells = Rows(mesh.cell_serial, mesh.n_global_cells)
+        rows = {"fields": {"Node": self.vertices, "Cell": self.cells}}
+        if faces is not None:
+            self.face_rows = Rows(faces, self.n_faces)
+            rows["fault"] = {"Cell": self.face_rows}
+            self.fault_id = np.asarray(fault_id, dtype=np.int64)[faces]
+        self.surface_vertices = self.mpi.bcast(None if surface is None else surface.vertices, root=0)
+        if self.surface_vertices is not None:
+            on = np.isin(self.vertices.rows, self.surface_vertices)
+            self.surface_rows, self.surface_take = self.vertices.rows[on], self.vertices.take[on]
+        run_on_root(comm, lambda: writer.release(list(rows)))      # writer: rank 0 only
+        directory = self.mpi.bcast(writer.dir if self.mpi.rank == 0 else None, root=0)
+        for name, by_center in rows.items():
+            self.series[name] = ParallelSeries(comm, directory, name, by_center)
+
+    def write(self, step, t, values):
+        """Write one step (LocalStep ``values``); returns the land surface's hazard maxima (every rank)."""
+        write = self._write_parallel if self.parallel else self._write_gathered
+        return self.mpi.bcast(write(step, t, values), root=0)
+
+    def _write_parallel(self, step, t, values):
+        disp = np.concatenate([values.displacement[:, :3], values.displacement[:, 3:]])
+        point = {"displacement": disp}
+        if values.head is not None:
+            point["head_change"] = np.concatenate([values.head, values.head])
+        cells = {"material": self.mesh.cell_material}
+        cells.update(values.cells)
+        entries = {"fields": self.series["fields"].write_step(step, t, point, cells)}
+        if values.faults is not None:
+            faults = {"fault": self.fault_id}
+            faults.update(values.faults)
+            entries["fault"] = self.series["fault"].write_step(step, t, None, faults)
+        u_surface = None
+        if self.surface_vertices is not None:
+            parts = self.mpi.gather((self.surface_rows, disp[self.surface_take]), root=0)
+            if self.mpi.rank == 0:
+                u_surface = np.zeros((len(self.surface_vertices), 3))
+                for rows, u in parts:
+                    u_surface[np.searchsorted(self.surface_vertices, rows)] = u
+
+        def write():
+            self.writer.add_steps(entries)
+            return self._surface_step(step, t, u_surface)
+        return run_on_root(self.comm, write)        # a failure to write ends every rank
+
+    def _write_gathered(self, step, t, values):
+        mesh = self.mesh
+        both = distributed.gather_vertex_values(mesh, values.displacement)
+        head = None if values.head is None else distributed.gather_vertex_values(mesh, values.head.reshape(-1, 1))
+        names = list(values.cells)
+        columns = [values.cells[k].reshape(len(mesh.cells), -1) for k in names]
+        stacked = distributed.gather_cell_values(mesh, np.concatenate(columns, axis=1))
+        faults = None if values.faults is None else self.mpi.gather((self.faces, values.faults), root=0)
+
+        def write():
+            split = self.split_vertices
+            u = np.concatenate([both[:, :3], both[split, 3:]])
+            point_data = {"displacement": u}
+            if head is not None:
+                point_data["head_change"] = np.concatenate([head[:, 0], head[split, 0]])
+            cell_data, start = {}, 0
+            for k, c in zip(names, columns):
+                block = stacked[:, start:start + c.shape[1]]
+                cell_data[k] = block[:, 0] if values.cells[k].ndim == 1 else block
+                start += c.shape[1]
+            self.writer.write_step(step, t, point_data, cell_data)
+            if faults is not None:
+                self.writer.write_fault_step(step, t, _by_face(faults, self.n_faces))
+            return self._surface_step(step, t, None if self.surface is None else u[self.surface.vertices])
+        return run_on_root(self.comm, write)        # a failure to write ends every rank
+
+    def _surface_step(self, step, t, u):
+        """Land-surface fields of one output step (rank 0): displacement and the earth-fissure hazard fields;
+        returns their maxima and where they are."""
+        surf = self.surface
+        if surf is None:
+            return None
+        fields = hazard.surface_fields(surf.points, surf.triangles, u)
+        self.writer.write_surface_step(step, t, {"displacement": u}, fields)
+        return hazard.maxima(surf.points, surf.triangles, fields)
+
+    def close(self):
+        for series in self.series.values():
+            series.close()
+        self.series = {}
+
+
+def _by_face(parts, n_faces):
+    """[(face ids, {name: values})] of every rank -> {name: values of all faces in serial order}."""
+    out = {}
+    for key in parts[0][1]:
+        first = np.asarray(parts[0][1][key])
+        out[key] = np.zeros((n_faces,) + first.shape[1:], dtype=first.dtype)
+        for faces, data in parts:
+            out[key][faces] = data[key]
+    return out

@@ -1,0 +1,72 @@
+"""Output written by every rank (pfault.io.parallel) against the serial writer, from the same values.
+
+tests/scripts/parallel_output.py runs a small fault scene with groundwater flow (Queretaro at size factor 6:
+displacement with split fault vertices, head change, pore-pressure change, stress, the fault's per-face fields,
+the land surface) and writes every output step twice: through the run's own output, which on 2 ranks is
+written in parallel, and through the writer that gathers the fields to rank 0 and writes them there. The two
+are compared dataset by dataset (np.array_equal: the same values, shapes, dtypes and attributes), the XDMF
+files text for text, and the parallel run's series read back through meshio's TimeSeriesReader.
+"""
+
+import os
+
+import numpy as np
+import pytest
+
+from conftest import run_script
+
+QRO = ["config/queretaro.opts", "-pfault_mesh_size_factor", "6", "-pfault_time_steps", "2", "-pfault_time_end",
+       "2*year", "-pfault_figures", "false"]
+
+
+def _datasets(path):
+    import h5py
+    out = {}
+    with h5py.File(path, "r") as h5:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset):
+                out[name] = (obj[()], dict(obj.attrs))
+            else:
+                out[name] = (None, dict(obj.attrs))
+        h5.visititems(visit)
+    return out
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_parallel_output_equals_the_serial_writer(tmp_path, ranks):
+    par, gathered = tmp_path / "run", tmp_path / "gathered"
+    info = run_script("parallel_output.py", ranks=ranks,
+                      args=[QRO[0], str(gathered), *QRO[1:], "-pfault_output_dir", str(par)])
+    if ranks > 1 and not info["h5py_mpi"]:
+        pytest.skip("h5py without MPI: the fields are gathered to rank 0")
+    assert info["parallel"] == (ranks > 1)
+    if ranks > 1:           # rows on every rank, and not one run each: the selections are exercised
+        assert min(info["runs"]["fields"]["Cell"]) > 1 and min(info["runs"]["fault"]["Cell"]) >= 1
+    for name in ("fields", "fault", "surface"):
+        a, b = _datasets(par / f"{name}.h5"), _datasets(gathered / f"{name}.h5")
+        assert sorted(a) == sorted(b), name
+        assert any(key.startswith("steps/000002/") for key in a), name
+        for key in a:
+            (x, xa), (y, ya) = a[key], b[key]
+            assert xa == ya, (name, key)
+            if x is not None:
+                assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y), (name, key)
+        assert (par / f"{name}.xdmf").read_text() == (gathered / f"{name}.xdmf").read_text(), name
+
+    import meshio
+    with meshio.xdmf.TimeSeriesReader(str(par / "fields.xdmf")) as reader:
+        points, _ = reader.read_points_cells()
+        assert reader.num_steps == 3
+        t, point_data, cell_data = reader.read_data(2)
+    steps = _datasets(par / "fields.h5")
+    assert len(points) == len(steps["mesh/points"][0])
+    assert np.array_equal(point_data["displacement"], steps["steps/000002/displacement"][0])
+    assert np.array_equal(point_data["head_change"], steps["steps/000002/head_change"][0])
+    assert np.array_equal(cell_data["stress"][0], steps["steps/000002/stress"][0])
+    assert np.abs(point_data["displacement"]).max() > 1e-3      # a field that moved, not zeros
+    with meshio.xdmf.TimeSeriesReader(str(par / "fault.xdmf")) as reader:
+        reader.read_points_cells()
+        assert reader.num_steps == 3
+        _, _, fault = reader.read_data(2)
+    assert np.array_equal(fault["slip"][0], _datasets(par / "fault.h5")["steps/000002/slip"][0])
+    assert os.path.exists(par / "summary.json")
