@@ -51,14 +51,21 @@ sim.run()
 run_on_root(comm, sim.write_summary, 0.0)
 run_on_root(comm, lambda: sim.mirror[0].close())
 out = sim.output
-runs = {}
+blocks = {}
 if out.parallel:
-    rows = {"fields": {"Node": out.vertices.runs, "Cell": out.cells.runs}}
+    # per series and kind of row, every rank's (block it writes, rows it holds outside that block)
+    from pfault.io.parallel import Block
+    rows = {"fields": {"Node": out.vertices, "Cell": out.cells}}
     if out.faces is not None:
-        rows["fault"] = {"Cell": out.face_rows.runs}
-    runs = {name: {c: comm.tompi4py().allgather(len(r)) for c, r in by.items()} for name, by in rows.items()}
+        rows["fault"] = {"Cell": out.face_rows}
+    for name, by_center in rows.items():
+        blocks[name] = {}
+        for c, r in by_center.items():
+            b = Block(comm.tompi4py(), r)
+            outside = int(((r.rows < b.start) | (r.rows >= b.stop)).sum())
+            blocks[name][c] = comm.tompi4py().allgather((b.stop - b.start, outside))
 import h5py  # noqa: E402
-info = {"ranks": comm.size, "parallel": out.parallel, "h5py_mpi": bool(h5py.get_config().mpi), "runs": runs}
+info = {"ranks": comm.size, "parallel": out.parallel, "h5py_mpi": bool(h5py.get_config().mpi), "blocks": blocks}
 sim.destroy()
 if comm.rank == 0:
     print(json.dumps(info))
