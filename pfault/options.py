@@ -285,7 +285,7 @@ _PETSC_LATE_OPTIONS = {"log_view", "options_left", "help", "options_file", "log_
                        "check_pointer_intensity", "error_output_stdout", "options_view"}
 
 
-def _petsc_library():
+def petsc_library():
     """The already loaded libpetsc shared object (Debian's or a pip build)."""
     with open("/proc/self/maps") as fh:
         for line in fh:
@@ -297,7 +297,7 @@ def _petsc_library():
 
 def unused_petsc_options(PETSc):
     """Names of options in the PETSc database that no object has read (as -options_left reports)."""
-    lib = _petsc_library()
+    lib = petsc_library()
     if lib is None:
         return []
     int_t = ctypes.c_int64 if PETSc.IntType().itemsize == 8 else ctypes.c_int32

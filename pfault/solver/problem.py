@@ -528,11 +528,11 @@ def _set_lag_preconditioner(snes, lag):
     if hasattr(snes, "setLagPreconditioner"):
         return snes.setLagPreconditioner(lag)
     import ctypes
+
+    from ..options import petsc_library
     global _LIBPETSC
     if _LIBPETSC is None:
-        with open("/proc/self/maps") as fh:
-            path = next(line.split()[-1] for line in fh if "libpetsc" in line.split()[-1])
-        _LIBPETSC = ctypes.CDLL(path)
+        _LIBPETSC = petsc_library()
         _LIBPETSC.SNESSetLagPreconditioner.argtypes = [ctypes.c_void_p, ctypes.c_int]
     err = _LIBPETSC.SNESSetLagPreconditioner(ctypes.c_void_p(snes.handle), lag)
     if err:

@@ -351,8 +351,6 @@ def steps_table(r):
     return "\n".join(lines)
 
 
-
-
 def _case_of(r):
     return os.path.basename(r["dir"]).split("-")[0]
 
