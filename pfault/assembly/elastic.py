@@ -8,7 +8,7 @@ from petsc4py import PETSc
 from ..mesh.serial import TET_FACES
 from ..physics import elasticity as el
 
-CHUNK = 65536
+CHUNK = 4096     # cells per kernel batch: element matrices of a batch stay in cache
 
 
 class ElasticAssembler:

@@ -1,4 +1,4 @@
-"""DMPlex from a SerialMesh on rank 0, distributed with PETSc's partitioner.
+"""DMPlex from a SerialMesh on rank 0, partitioned by a graph partitioner and distributed by DMPlexDistribute.
 
 Per-point data (cell connectivity in serial vertex ids, materials, boundary tags, constraints) travel
 to their new owners through the migration PetscSF returned by DMPlexDistribute; output fields come
@@ -13,7 +13,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from .serial import TET_FACES
+from .serial import TET_FACES, face_keys
 
 
 @dataclass
@@ -74,6 +74,60 @@ def _int_type(width):
     return t
 
 
+def dual_graph(tets, nv):
+    """Cells sharing a face, as CSR (row offsets, sorted columns) over the cells of ``tets``."""
+    keys = face_keys(tets[:, TET_FACES].reshape(-1, 3), nv)
+    order = np.argsort(keys)
+    sk = keys[order]
+    pair = np.nonzero(sk[1:] == sk[:-1])[0]
+    a, b = order[pair], order[pair + 1]            # cell * 4 + local face, on either side of a face
+    none = np.iinfo(np.int64).max
+    neighbour = np.full(4 * len(tets), none)
+    neighbour[a], neighbour[b] = b // 4, a // 4
+    neighbour = np.sort(neighbour.reshape(-1, 4), axis=1)
+    has = neighbour != none
+    offsets = np.zeros(len(tets) + 1, dtype=PETSc.IntType)
+    np.cumsum(has.sum(axis=1), out=offsets[1:])
+    return offsets, neighbour[has].astype(PETSc.IntType)
+
+
+def _set_partition(dm, tets, nv):
+    """Partition the cells (all on rank 0) for DMPlexDistribute.
+
+    The cells' dual graph is built here from the face keys and partitioned by PETSc's MatPartitioning (PT-Scotch,
+    or ParMETIS if PETSc has it; ``-mat_partitioning_type`` chooses), handed to the distribution as a shell
+    partition. DMPlex's own graph construction on an uninterpolated mesh takes about 10 times longer (7.8 s
+    against 0.9 s for a million tetrahedra). ``-petscpartitioner_type`` chooses PETSc's mesh partitioner instead,
+    as does a PETSc built without a graph partitioner.
+    """
+    comm = dm.getComm()
+    part = dm.getPartitioner()
+    graph_type = next((t for t in ("parmetis", "ptscotch") if PETSc.Sys.hasExternalPackage(t)), None)
+    if comm.size == 1 or PETSc.Options().hasName("petscpartitioner_type") or graph_type is None:
+        part.setFromOptions()
+        part.destroy()      # our reference; the DM keeps its own
+        return
+    nc = 0 if tets is None else len(tets)
+    offsets, cols = dual_graph(tets, nv) if nc else (np.zeros(1, PETSc.IntType), np.zeros(0, PETSc.IntType))
+    n_global = comm.tompi4py().allreduce(nc)
+    graph = PETSc.Mat().createAIJ(((nc, n_global), (nc, n_global)), csr=(offsets, cols, np.ones(len(cols))),
+                                  comm=comm)
+    mp = PETSc.MatPartitioning().create(comm)
+    mp.setAdjacency(graph)
+    mp.setType(graph_type)
+    mp.setFromOptions()
+    target = PETSc.IS()
+    mp.apply(target)
+    rank_of = target.getIndices()
+    sizes = np.bincount(rank_of, minlength=comm.size).astype(PETSc.IntType)
+    points = np.argsort(rank_of, kind="stable").astype(PETSc.IntType)
+    part.setType(PETSc.Partitioner.Type.SHELL)
+    part.setShellPartition(comm.size, sizes, points)
+    part.destroy()
+    for obj in (target, mp, graph):
+        obj.destroy()
+
+
 def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=None, split=None):
     """Create, distribute and localise the mesh. ``serial`` and the per-entity arrays live on rank 0."""
     rank = comm.rank
@@ -113,9 +167,7 @@ def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=No
             root[split.minus_cell, 13 + split.minus_lface] = np.arange(len(split.minus_cell))
     serial_id = np.concatenate([np.arange(nc), np.arange(nv)]).astype(itype)
 
-    part = dm.getPartitioner()
-    part.setFromOptions()
-    part.destroy()          # our reference; the DM keeps its own
+    _set_partition(dm, serial.tets if rank == 0 else None, nv)
     migration = dm.distribute() if comm.size > 1 else None
     p_start, p_end = dm.getChart()
     if migration is not None:

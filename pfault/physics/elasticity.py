@@ -37,17 +37,18 @@ def stiffness(grad, vol, lam, mu):
     """Element stiffness matrices (n,12,12), dof order (vertex, component).
 
     K[a i, b j] = V (lam g_ai g_bj + mu g_aj g_bi + mu delta_ij g_a . g_b)
+
+    Built from batched outer products (matmul), fastest on batches of a few thousand cells that stay in cache.
     """
     n = len(vol)
-    lam = np.broadcast_to(lam, (n,))
-    mu = np.broadcast_to(mu, (n,))
-    gg = np.einsum("nai,nbj->naibj", grad, grad)
-    k = lam[:, None, None, None, None] * gg
-    k += mu[:, None, None, None, None] * np.transpose(gg, (0, 1, 4, 3, 2))
-    dot = np.einsum("nai,nbi->nab", grad, grad)
-    eye = np.eye(3)
-    k += (mu[:, None, None] * dot)[:, :, None, :, None] * eye[None, None, :, None, :]
-    k *= vol[:, None, None, None, None]
+    a = grad * (vol * np.broadcast_to(lam, (n,)))[:, None, None]
+    b = grad * (vol * np.broadcast_to(mu, (n,)))[:, None, None]
+    row = grad.reshape(n, 1, 12)
+    k = np.matmul(a.reshape(n, 12, 1), row).reshape(n, 4, 3, 4, 3)
+    k += np.matmul(b.reshape(n, 12, 1), row).reshape(n, 4, 3, 4, 3).transpose(0, 1, 4, 3, 2)
+    dot = np.matmul(b, grad.transpose(0, 2, 1))
+    for i in range(3):
+        k[:, :, i, :, i] += dot
     return k.reshape(n, 12, 12)
 
 
