@@ -39,12 +39,10 @@ def _destroy(sim):
 
 
 def _last_words(sim, line, code):
-    """A rank failing alone, before the job is aborted: rank 0 records the failure in the summary.json of a run
-    in place and removes its staging directory (other ranks hold no files)."""
-    if sim is not None and sim.comm.rank == 0:
-        sim.record_failure(line, code)
-        if getattr(sim, "writer", None) is not None:
-            sim.writer.abandon()
+    """A rank failing alone, before the job is aborted: it records the failure in the summary.json of a run in
+    place, or removes the staging directory of one that has not completed a step (Simulation.last_words)."""
+    if sim is not None:
+        sim.last_words(line, code)
 
 
 def main(options_file, argv):

@@ -237,7 +237,7 @@ class RunGuard:
     def settle(self, exc, wait=SETTLE_SECONDS, last_words=None):
         """Called by a rank with an exception. Returns the exit code when every rank failed together (rank
         0 prints the line); otherwise prints this rank's line, calls ``last_words(line, exit code)`` (what
-        this rank alone can still record: rank 0 says in summary.json how the run ended) and aborts the MPI
+        this rank alone can still record: how the run ended, in summary.json) and aborts the MPI
         job with the code."""
         err = as_pfault_error(exc)
         comm = self.comm

@@ -64,6 +64,8 @@ class Simulation:
         self.reader = OptionReader(PETSc)
         self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "output": 0.0}
         self.summary = None
+        self.staging = self.run_path = None      # where the output goes (every rank, once it is opened)
+        self.committed = False                   # the run's directory is in place
 
     # ------------------------------------------------------------------------------------------
     def setup(self):
@@ -242,6 +244,10 @@ class Simulation:
         stage = PETSc.Log.Stage("Output")
         stage.push()
         self.writer = run_on_root(self.comm, self._create_writer)
+        # where the run writes, known to every rank: one that fails alone says there how the run ended
+        # (last_words)
+        w = self.writer
+        self.staging, self.run_path = self.comm.tompi4py().bcast((w.dir, w.path) if self.comm.rank == 0 else None)
         self.output = self._step_output(self.writer)
         if not self.restart_dir:
             self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
@@ -405,6 +411,7 @@ class Simulation:
             self.writer.write_summary(summary)
             self.writer.commit()
         run_on_root(self.comm, write)      # a failure to write ends every rank
+        self.committed = True              # the run's directory is in place (RunWriter.commit)
 
     def _progress(self, step, rec):
         extra = ""
@@ -504,6 +511,29 @@ class Simulation:
             self.writer.write_failure(line, code, not_converged=code == EXIT_NOT_CONVERGED)
         except (OSError, ValueError):
             pass
+
+    def last_words(self, line, code):
+        """This rank failed alone and aborts the MPI job next (pfault.errors.RunGuard.settle); the other ranks
+        wait in a collective call, write nothing and are stopped with the job. Whichever rank this is, it
+        says how the run ended in the summary.json of a run directory in place (that of the last completed
+        step: every rank knows it is in place once that step is done), or removes the staging directory of a
+        run that has not completed a step. Best effort: the failure may be the full disk itself."""
+        import shutil
+        from .errors import EXIT_NOT_CONVERGED
+        from .io.output import record_failure
+        writer = getattr(self, "writer", None)
+        if self.run_path is None:
+            return                                  # nothing written yet
+        committed = writer.committed if writer is not None else self.committed
+        try:
+            if committed:
+                record_failure(self.run_path, line, code, not_converged=code == EXIT_NOT_CONVERGED)
+            elif writer is None:
+                shutil.rmtree(self.staging, ignore_errors=True)
+        except (OSError, ValueError):
+            pass
+        if writer is not None:
+            writer.abandon()                        # closes its files; a directory in place stays
 
     def destroy(self):
         if getattr(self, "output", None) is not None:

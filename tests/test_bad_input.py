@@ -73,9 +73,8 @@ class Case:
     message: str
     disk: str = "none"      # none: no output dir | kept: a previous run's files untouched | file: a file
                             # in the way untouched | partial: a run that stopped in step 3, its summary.json
-                            # and checkpoint.h5 those of step 2
-    alone: bool = False     # on 2 ranks, one rank fails alone and aborts the job: summary.json cannot say
-                            # how the run ended (running: true); otherwise it gives the error and the code
+                            # and checkpoint.h5 those of step 2, the error and the code in summary.json
+                            # (also when one rank failed alone and aborted the job: that rank wrote them)
 
 
 def scene(*extra):
@@ -206,13 +205,14 @@ CASES = [
     Case("flow_not_converged", scene_file(FLOW_SCENE, "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
          "groundwater flow: KSP flow_ did not converge at t = 43200 s (reason -3)", "kept"),
     # faults on one rank only (rank 1 of 2): the job ends with the line and the code
-    Case("bug_on_one_rank", inject("bug", 1, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial",
-         alone=True),
+    Case("bug_on_one_rank", inject("bug", 1, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial"),
+    Case("bug_on_one_rank_before_its_first_step_is_written", inject("bug_at_step_end", 1, 1), 6,
+         "RuntimeError: injected fault at the end of step 1 (a bug", "none"),
     Case("bug_on_rank_0", inject("bug", 0, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial"),
     Case("bug_on_rank_0_before_any_step", inject("bug", 0, 1), 6, "RuntimeError: injected fault in step 1 (a bug",
          "none"),
     Case("memory_on_one_rank", inject("memory", 1, 3), 5, "out of memory (injected: unable to allocate 8 GiB",
-         "partial", alone=True),
+         "partial"),
     Case("flow_failure_after_two_steps", inject("flow", 0, 3), 3, "groundwater flow: injected: KSP flow_ did not "
          "converge in step 3; the flow solver is set with -flow_ksp_*", "partial"),
     Case("disk_full_during_run", inject("disk_full", 0, 3), 4,
@@ -272,16 +272,40 @@ def test_bad_input(tmp_path, case, ranks):
         with open(out / "summary.json") as fh:
             summary = json.load(fh)
         assert summary["completed_steps"] == [1, 2], summary
-        if case.alone and ranks > 1:
-            assert summary["running"] and "error" not in summary, summary
-        else:
-            assert not summary["running"] and summary["exit_code"] == case.code, summary
-            assert summary["error"] == lines[0] and summary["converged"] == (case.code != 3)
+        assert not summary["running"] and summary["exit_code"] == case.code, summary
+        assert summary["error"] == lines[0] and summary["converged"] == (case.code != 3)
+        assert not [f for f in os.listdir(out) if f.endswith(".tmp")], os.listdir(out)
         import h5py
         with h5py.File(out / "fields.h5", "r") as h5:
             assert sorted(int(k) for k in h5["steps"]) == [0, 1, 2]
         with h5py.File(out / "checkpoint.h5", "r") as h5:
             assert h5.attrs["step"] == 2
+
+
+def test_failure_on_one_rank_alone_is_recorded_and_continued(tmp_path):
+    """Rank 1 of 2 fails alone in step 3 and aborts the job (rank 0, waiting in the step's collective calls, is
+    stopped with it): summary.json, written by rank 1 before the abort, is that of step 2 with how the run
+    ended, nothing else is left beside the run's files, and the run continues from its checkpoint to the
+    analytic settlement of the oedometer (0.83333 m at t = 10 s; 1/5 of it after step 2)."""
+    out = tmp_path / "out"
+    code, _, stderr = run_pfault(inject("bug", 1, 3)(tmp_path, out, 2) + ["-pfault_figures", "false"], 2)
+    line = ("pfault: internal error on rank 1 (the other ranks are stopped): RuntimeError: injected fault in step 3 "
+            "(a bug: please report it with the command line and the traceback above)")
+    assert code == 6 and _error_lines(stderr) == [line], stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["running"] is False and summary["exit_code"] == 6 and summary["error"] == line, summary
+    assert summary["converged"] and not summary["interrupted"] and summary["ranks"] == 2
+    assert summary["completed_steps"] == [1, 2] and [r["step"] for r in summary["steps"]] == [1, 2]
+    assert summary["max_subsidence_m"] == pytest.approx(0.8333333333 / 5, rel=1e-9)
+    assert sorted(os.listdir(out)) == ["checkpoint.h5", "fields.h5", "fields.xdmf", "materials.json", "options.txt",
+                                       "summary.json", "surface.h5", "surface.xdmf", "versions.json"]
+    assert sorted(os.listdir(tmp_path)) == ["out"]
+    code, _, stderr = run_pfault(["-m", "pfault", OED, "-pfault_restart", str(out), "-pfault_figures", "false"], 2)
+    assert code == 0, stderr[-3000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["completed_steps"] == list(range(1, 11)) and summary["restart"]["step"] == 2
+    assert not summary["running"] and "error" not in summary and "exit_code" not in summary
+    assert summary["max_subsidence_m"] == pytest.approx(0.8333333333, rel=1e-9)
 
 
 def test_catalogue_size():

@@ -31,11 +31,14 @@ TIMEOUT = 120
 # ------------------------------------------------------------------------------------------------------
 # helpers
 # ------------------------------------------------------------------------------------------------------
-def start_and_signal(args, ranks, send, after="step    1 "):
-    """Run pfault, call ``send(proc)`` once a stdout line starts with ``after``; returns (exit code, stdout,
-    stderr). Everything under a timeout: a run that hangs fails the test."""
-    proc = subprocess.Popen(command(["-m", "pfault", *args], ranks), cwd=REPO, env=mpi_env(),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def start_and_signal(args, ranks, send, after="step    1 ", ready=None, mpirun_args=()):
+    """Run pfault, call ``send(proc)`` once a stdout line starts with ``after`` (or, given ``ready``, once
+    ``ready()`` is true: it is asked at least every 0.1 s); returns (exit code, stdout, stderr). ``mpirun_args``
+    go to mpirun. Everything under a timeout: a run that hangs fails the test."""
+    cmd = command(["-m", "pfault", *args], ranks)
+    if ranks > 1:
+        cmd = cmd[:1] + list(mpirun_args) + cmd[1:]
+    proc = subprocess.Popen(cmd, cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + TIMEOUT
     lines = []
     try:
@@ -43,14 +46,16 @@ def start_and_signal(args, ranks, send, after="step    1 "):
         sel.register(proc.stdout, selectors.EVENT_READ)
         while True:
             if time.monotonic() > deadline:
-                raise AssertionError("no progress line in time:\n" + "".join(lines))
-            if not sel.select(timeout=1.0):
-                continue
-            line = proc.stdout.readline()
-            if not line:
-                raise AssertionError("the run ended before the signal:\n" + "".join(lines) + proc.stderr.read())
-            lines.append(line)
-            if line.startswith(after):
+                raise AssertionError("the run was not ready for the signal in time:\n" + "".join(lines))
+            if sel.select(timeout=0.1 if ready else 1.0):
+                line = proc.stdout.readline()
+                if not line:
+                    raise AssertionError("the run ended before the signal:\n" + "".join(lines)
+                                         + proc.stderr.read())
+                lines.append(line)
+                if ready is None and line.startswith(after):
+                    break
+            if ready is not None and ready():
                 break
         sel.close()
         send(proc)
@@ -161,23 +166,111 @@ def test_stop_signal_before_the_time_loop_is_one_line(tmp_path, sig):
     assert not run_dir.exists() and not [f for f in os.listdir(tmp_path) if ".pfault-" in f]
 
 
-def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path):
-    """Open MPI 4.1's mpirun answers SIGTERM by sending the ranks SIGTERM a second later and SIGKILL a
-    second after that, and exits with 1: the ranks stop after their step if it ends in time, or are killed
-    in the middle of the next. Either way every completed step is readable and the run continues from it
-    (here by one more step of the same length)."""
+def completed_on_disk(run_dir):
+    """The completed steps summary.json in ``run_dir`` lists (none before the run's directory is in place
+    after its first step; summary.json is replaced whole, so it is never read half-written)."""
+    try:
+        with open(os.path.join(run_dir, "summary.json")) as fh:
+            return json.load(fh)["completed_steps"]
+    except FileNotFoundError:
+        return []
+
+
+def check_killed(run_dir):
+    """A run directory as a run killed during a step leaves it: summary.json and checkpoint.h5 of its last
+    completed step, and in each series every completed step, readable, and at most the fields of the step in
+    progress besides (flushed before it was killed); returns the summary."""
+    import h5py
+    with open(os.path.join(run_dir, "summary.json")) as fh:
+        summary = json.load(fh)
+    done = summary["completed_steps"]
+    assert done == list(range(1, len(done) + 1)) and done
+    assert summary["running"] and not summary["interrupted"] and "error" not in summary
+    times = [0.0] + [r["time_s"] for r in summary["steps"] if r.get("step", 0) > 0]
+    for name in ("fields", "fault", "surface"):
+        steps = read_series(os.path.join(run_dir, name + ".xdmf"))
+        assert len(steps) - len(times) in (0, 1), name
+        assert [t for t, _, _ in steps[:len(times)]] == pytest.approx(times)
+        with h5py.File(os.path.join(run_dir, name + ".h5"), "r") as h5:
+            written = sorted(int(k) for k in h5["steps"])
+        assert written in ([0] + done, [0] + done + [done[-1] + 1]) and len(written) >= len(steps), name
+    with h5py.File(os.path.join(run_dir, "checkpoint.h5"), "r") as h5:
+        assert h5.attrs["step"] == done[-1]
+    return summary
+
+
+@pytest.mark.parametrize("grace", [None, 5], ids=["default", "grace-5s"])
+def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path, grace):
+    """Open MPI 4.1's mpirun does not pass SIGTERM on: it sends the ranks SIGCONT, then SIGTERM
+    ``odls_base_sigkill_timeout`` seconds later (default 1) and SIGKILL as long after that, and exits with 1.
+    The signal goes to mpirun once step 1 is on disk (summary.json lists it). With the default second the
+    ranks stop after their step if it ends in time, or are killed in the middle of the next: either way every
+    step completed by the signal is still there and readable, and the directory is what the summary says.
+    Given 5 s (steps of ~0.1-0.3 s here), the ranks must have stopped cleanly: summary.json says they were
+    interrupted by SIGTERM after the step they stopped after. The run then continues from its last completed
+    step (one more step of the same length), and the continued directory is whole."""
     run_dir = str(tmp_path / "run")
-    opts = [*QRO_OPTS[:4], "-pfault_time_steps", "60", "-pfault_time_end", "6*year", "-pfault_figures", "false"]
-    code, out, err = start_and_signal([QRO, "-pfault_output_dir", run_dir, *opts], 2, _to_process(signal.SIGTERM))
-    assert code != 0
-    summary = check_readable(run_dir)
-    assert summary["running"] or summary["interrupted"]
-    k = summary["completed_steps"][-1]
-    assert k < 60
-    more = [*QRO_OPTS[:4], "-pfault_time_steps", str(k + 1), "-pfault_time_end", f"{(k + 1) / 10}*year",
+    # 600 steps of 0.01 year: the run lasts minutes; it is stopped after some tens
+    opts = [*QRO_OPTS[:4], "-pfault_time_steps", "600", "-pfault_time_end", "6*year", "-pfault_figures", "false"]
+    at_signal = []
+
+    def send(proc):
+        at_signal.extend(completed_on_disk(run_dir))
+        os.kill(proc.pid, signal.SIGTERM)
+
+    code, out, err = start_and_signal([QRO, "-pfault_output_dir", run_dir, *opts], 2, send,
+                                      ready=lambda: bool(completed_on_disk(run_dir)),
+                                      mpirun_args=[] if grace is None else ["--mca", "odls_base_sigkill_timeout",
+                                                                            str(grace)])
+    assert code != 0, out[-2000:] + err[-2000:]
+    with open(os.path.join(run_dir, "summary.json")) as fh:
+        interrupted = json.load(fh)["interrupted"]
+    assert interrupted or grace is None, f"SIGTERM did not stop the ranks within {grace} s:\n{out[-2000:]}{err[-2000:]}"
+    if interrupted:
+        summary = check_readable(run_dir)
+        k = summary["completed_steps"][-1]
+        assert not summary["running"] and summary["stop_signal"] == "SIGTERM" and "error" not in summary
+        assert f"pfault: stopped after step {k} (SIGTERM)" in out
+        assert sorted(line for line in err.splitlines() if "received" in line) == [
+            f"pfault: SIGTERM received (rank {r}): stopping after the current step (send it again to stop at once)"
+            for r in (0, 1)]
+    else:
+        summary = check_killed(run_dir)
+        k = summary["completed_steps"][-1]
+    assert at_signal and at_signal[-1] <= k < 600
+    more = [*QRO_OPTS[:4], "-pfault_time_steps", str(k + 1), "-pfault_time_end", f"{(k + 1) / 100}*year",
             "-pfault_restart", run_dir]
     _, s = run_scene(QRO, run_dir, ranks=2, extra=more)
     assert s["completed_steps"] == list(range(1, k + 2)) and s["restart"]["step"] == k
+    assert not s["running"] and not s["interrupted"] and s["converged"]
+    check_readable(run_dir)
+
+
+def test_killed_run_leaves_completed_steps(tmp_path):
+    """Ranks killed outright (SIGKILL, as by the out-of-memory killer or a node failure) in the middle of a
+    run, once step 1 is on disk: every step completed by then is still there and readable, summary.json says
+    the run was going on (it had no chance to say more), and the run continues from its last completed step."""
+    run_dir = str(tmp_path / "run")
+    opts = [*QRO_OPTS[:4], "-pfault_time_steps", "600", "-pfault_time_end", "6*year", "-pfault_figures", "false"]
+    at_signal = []
+
+    def kill(proc):
+        at_signal.extend(completed_on_disk(run_dir))
+        time.sleep(0.5)                 # into a later step
+        for pid in children(proc.pid):
+            os.kill(pid, signal.SIGKILL)
+
+    code, out, err = start_and_signal([QRO, "-pfault_output_dir", run_dir, *opts], 2, kill,
+                                      ready=lambda: bool(completed_on_disk(run_dir)))
+    assert code != 0 and "received" not in err
+    summary = check_killed(run_dir)
+    k = summary["completed_steps"][-1]
+    assert at_signal and at_signal[-1] <= k < 600
+    more = [*QRO_OPTS[:4], "-pfault_time_steps", str(k + 1), "-pfault_time_end", f"{(k + 1) / 100}*year",
+            "-pfault_restart", run_dir]
+    _, s = run_scene(QRO, run_dir, ranks=2, extra=more)
+    assert s["completed_steps"] == list(range(1, k + 2)) and s["restart"]["step"] == k
+    check_readable(run_dir)
 
 
 # ------------------------------------------------------------------------------------------------------

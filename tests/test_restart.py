@@ -172,6 +172,93 @@ def test_restart_keeps_the_model_but_may_extend_the_loading(tmp_path):
     assert s["converged"] and s["completed_steps"] == list(range(1, 9))
 
 
+def test_restart_may_change_the_load_only_after_the_checkpoint(tmp_path):
+    """The oedometer (dp from 0 to -0.1 MPa over 10 s, settlement c_M alpha |dp| H = 8.3333e-8 1/Pa * |dp| *
+    100 m) stopped at t = 5 s. A table that changes the load up to 5 s, at a step's time or between two, is an
+    input error naming the option, before anything is written; one that agrees up to 5 s and triples the
+    load at 10 s gives the uninterrupted run's answer with that table (2.5 m)."""
+    opts, extra, end, half = SCENES["oedometer"]
+    option = "-pfault_material_soil_pressure_change"
+    part, ref = tmp_path / "part", tmp_path / "ref"
+    run_scene(opts, part, extra=_steps(extra, 2, half))
+    before = {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)}
+    for table, at, now, was in [("0:0,10:-0.2*MPa", 5, -100000, -50000),           # at the checkpoint's time
+                                ("0:0,2:-0.05*MPa,5:-0.05*MPa,10:-0.1*MPa", 2, -50000, -20000)]:  # between steps
+        proc, _ = run_scene(opts, part, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part), option, table],
+                            check=False)
+        assert proc.returncode == 1, proc.stderr
+        assert proc.stderr.splitlines()[-1] == (
+            f"pfault: error: -pfault_restart {part}: {option} changes the pore-pressure change of soil before "
+            f"t = 5 s, where that run's checkpoint is (at t = {at} s: {now} Pa, that run {was} Pa); a continued "
+            f"run may change a loading table only after that time: keep the values of that run ({option} "
+            "0:0,10:-0.1*MPa) up to it")
+        assert {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)} == before
+    later = "0:0,5:-50*kPa,10:-0.3*MPa"         # the same up to 5 s, written another way, then steeper
+    _, s_ref = run_scene(opts, ref, extra=[*_steps(extra, 4, end), option, later])
+    proc, s = run_scene(opts, part, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part), option, later])
+    assert s["converged"] and s["completed_steps"] == [1, 2, 3, 4] and s["restart"]["step"] == 2
+    assert [r["max_subsidence_m"] for r in s["steps"]] == pytest.approx([0.20833333, 0.41666667, 1.4583333, 2.5],
+                                                                        rel=1e-7)
+    compare_runs(ref, part, RTOL)
+
+
+def test_restart_may_change_the_well_rate_only_after_the_checkpoint(tmp_path):
+    """The flow box on 2 ranks, pumped at 3 L/s from day 1 (ramped up from 0 at t = 0), stopped after 1 day:
+    continued with another rate on the first day it is an input error; with the rate doubled from day 1 to
+    day 2 it equals the run pumped so from the start, and its drawdown differs from the unchanged one's."""
+    opts = scene_file(tmp_path, "flow")
+    part, ref, same = tmp_path / "part", tmp_path / "ref", tmp_path / "same"
+    run_scene(opts, part, ranks=2, extra=_steps((), 2, "1*day"))
+    proc, _ = run_scene(opts, part, ranks=2, extra=[*_steps((), 4, "2*day"), "-pfault_restart", str(part),
+                                                    "-pfault_flow_well_rate", "0:0,1*day:4*L/s"], check=False)
+    assert proc.returncode == 1, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("pfault: error")]
+    assert lines == [f"pfault: error: -pfault_restart {part}: -pfault_flow_well_rate changes the pumping rate of "
+                     "each well before t = 86400 s, where that run's checkpoint is (at t = 86400 s: 0.004 m**3/s, "
+                     "that run 0.003 m**3/s); a continued run may change a loading table only after that time: "
+                     "keep the values of that run (-pfault_flow_well_rate 0:0,1*day:3*L/s) up to it"]
+    doubled = ["-pfault_flow_well_rate", "0:0,1*day:3*L/s,2*day:6*L/s"]
+    _, s_same = run_scene(opts, same, ranks=2, extra=_steps((), 4, "2*day"))
+    run_scene(opts, ref, ranks=2, extra=[*_steps((), 4, "2*day"), *doubled])
+    _, s = run_scene(opts, part, ranks=2, extra=[*_steps((), 4, "2*day"), "-pfault_restart", str(part), *doubled])
+    assert s["completed_steps"] == [1, 2, 3, 4] and s["restart"]["step"] == 2
+    assert s["steps"][-1]["max_drawdown_m"] > 1.2 * s_same["steps"][-1]["max_drawdown_m"]
+    compare_runs(ref, part, RTOL)
+
+
+def test_loading_tables_are_compared_by_the_load_they_give():
+    """run_options.check_loading on option sets alone (no run): what counts is the load up to the checkpoint's
+    time, in SI, whichever option or unit gives it; a load no option gives is zero (a boundary's factor 1)."""
+    from pfault.errors import InputError
+    from pfault.io.run_options import LOADING, check_loading
+    from pfault.options import SPECS
+    rho_g = 1000.0 * 9.80665
+
+    def check(theirs, mine, until):
+        check_loading("run", theirs, mine, until, 1000.0, 9.80665)
+
+    dp = {"pfault_material_soil_pressure_change": f"0:0,10:{-10 * rho_g}"}
+    check(dp, {"pfault_material_soil_head_drawdown": "0:0,10:10"}, 10.0)       # 10 m of head is that change
+    check(dp, {"pfault_material_soil_head_drawdown": "0:0,10:10,20:50"}, 10.0)
+    with pytest.raises(InputError, match=r"-pfault_material_soil_head_drawdown changes the pore-pressure change "
+                                         r"of soil before t = 10 s.* \(at t = 10 s: -107873 Pa, "
+                                         r"that run -98066.5 Pa\)"):
+        check(dp, {"pfault_material_soil_head_drawdown": "0:0,10:11"}, 10.0)
+    check({}, {"pfault_bc_top_history": "0:1,5:1,10:2"}, 5.0)                   # the factor is 1 until 5 s
+    with pytest.raises(InputError, match=r"at t = 10 s: 2, that run 1\); .* \(no -pfault_bc_top_history\)"):
+        check({}, {"pfault_bc_top_history": "0:1,5:1,10:2"}, 10.0)
+    with pytest.raises(InputError, match=r"-pfault_material_rock_pressure_change changes .*\(at t = 0 s: -1 Pa, "
+                                         r"that run 0 Pa\)"):
+        check(dp, {**dp, "pfault_material_rock_pressure_change": "0:-1,10:-1"}, 1.0)
+    check({"pfault_flow_well_rate": "0:0,1*year:300*L/s"}, {"pfault_flow_well_rate": "0:0,1*year:0.3"}, 1e9)
+    with pytest.raises(InputError, match=r"-pfault_flow_well_rate changes"):
+        check({"pfault_flow_well_rate": "0:0,1*year:300*L/s"}, {"pfault_flow_well_rate": "0:0,2*year:0.3"}, 1e6)
+    # every table option is a loading table (a table another kind of option would need its own rule)
+    for spec in SPECS:
+        name = spec.name.replace("<material>", "soil").replace("<surface>", "top")
+        assert (spec.kind == "table") == any(pattern.match(name) for pattern, *_ in LOADING), spec.name
+
+
 def test_a_failed_continuation_keeps_the_checkpoint(tmp_path):
     """A continued run whose first step does not converge (exit 3) replaces the directory with its output,
     which keeps the checkpoint it started from: the run can be continued again."""

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 
 import numpy as np
 from mpi4py import MPI
@@ -41,6 +40,7 @@ from petsc4py import PETSc
 
 from ..errors import InputError
 from ..mesh import distributed
+from . import run_options
 from .output import TMP_SUFFIX, open_h5
 
 FORMAT = 2                     # 1: the active-set solver's (fault states, predictor)
@@ -181,50 +181,10 @@ def read(run_dir):
     return out
 
 
-# options a continued run may change: output, solver, time stepping, and the loading tables (to extend a
-# history past the old end); every other -pfault_* option must equal that of the run it continues
-RESTART_MAY_CHANGE = re.compile(r"^pfault_(scene|output_.*|figures|solver|contact_monitor|time_.*|restart|"
-                                r"material_.*_(head_drawdown|pressure_change)|flow_well_rate|bc_.*_history)$")
-
-
-def _physical_options(options):
-    return {k.lower(): ("" if v is None else str(v)) for k, v in options.items()
-            if k.lower().startswith("pfault_") and not RESTART_MAY_CHANGE.match(k.lower())}
-
-
-def read_run_options(run_dir):
-    """The -pfault_* options of the run in ``run_dir`` (its options.txt), {name: value string}."""
-    out = {}
-    with open(os.path.join(run_dir, "options.txt")) as fh:
-        for line in fh:
-            if line.startswith("-"):
-                name, _, value = line[1:].rstrip("\n").partition(" ")
-                out[name] = value
-    return out
-
-
-def check_options(run_dir, options):
-    """InputError naming the first physical option (material, fault, boundary condition, mesh, geostatic
-    state, flow) that differs from the run in ``run_dir``: a continued run equals the uninterrupted one only
-    with the same model. ``options``: this run's PETSc options."""
-    try:
-        theirs = _physical_options(read_run_options(run_dir))
-    except OSError:
-        return      # a run directory without options.txt: the checkpoint's own checks stand
-    mine = _physical_options(options)
-    for key in sorted(set(theirs) | set(mine)):
-        if theirs.get(key) != mine.get(key):
-            was = f"-{key} {theirs[key]}".rstrip() if key in theirs else f"no -{key}"
-            now = f"-{key} {mine[key]}".rstrip() if key in mine else f"no -{key}"
-            raise InputError(f"-pfault_restart {run_dir}: that run had {was}, this one {now}; a continued run "
-                             "keeps the model (materials, faults, boundary conditions, mesh, initial state, "
-                             "flow): give the options of that run (only output, solver, time and loading-table "
-                             "options may change)")
-
-
 def check(ckpt, run_dir, sim):
-    """InputError where the checkpoint does not belong to this scene (rank 0)."""
-    check_options(run_dir, dict(PETSc.Options().getAll()))
+    """InputError where the checkpoint does not belong to this scene and load (rank 0)."""
+    run_options.check_options(run_dir, dict(PETSc.Options().getAll()), float(ckpt["attrs"]["time_s"]),
+                              sim.settings.water_density, sim.settings.gravity)
     a = ckpt["attrs"]
     mine = {"nodes": int(sim.mesh.n_global_vertices), "cells": int(sim.mesh.n_global_cells),
             "fault_faces": int(len(sim.fault_id)) if sim.fault_settings else 0,

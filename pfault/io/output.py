@@ -66,16 +66,33 @@ def git_hash():
     return out.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
 
 
-def replace_text(path, text):
-    """Write a text file whole: into a temporary sibling, then os.replace (atomic on POSIX)."""
-    tmp = path + TMP_SUFFIX
+def replace_text(path, text, tmp=None):
+    """Write a text file whole: into a temporary sibling (``tmp``, default ``path`` + TMP_SUFFIX), then
+    os.replace (atomic on POSIX)."""
+    tmp = path + TMP_SUFFIX if tmp is None else tmp
     with open(tmp, "w") as fh:
         fh.write(text)
     os.replace(tmp, path)
 
 
-def replace_json(path, data):
-    replace_text(path, json.dumps(data, indent=2) + "\n")
+def replace_json(path, data, tmp=None):
+    replace_text(path, json.dumps(data, indent=2) + "\n", tmp)
+
+
+def record_failure(directory, line, code, not_converged=False):
+    """The summary.json in ``directory`` (that of the run's last completed step) says how the run ended:
+    ``running`` false, the ``error`` line and the ``exit_code`` (``converged`` false when a solve failed).
+
+    Any rank may call it, the one that failed alone before it aborts the job included (the others then wait
+    in a collective call and write nothing); the temporary file is named after the writing process, so that
+    two writers never share one."""
+    path = os.path.join(directory, "summary.json")
+    with open(path) as fh:
+        summary = json.load(fh)
+    summary.update(running=False, error=line, exit_code=int(code))
+    if not_converged:
+        summary["converged"] = False
+    replace_json(path, summary, tmp=f"{path}.{os.getpid()}{TMP_SUFFIX}")
 
 
 def open_h5(path, mode):
@@ -325,15 +342,8 @@ class RunWriter:
         """A run that ends with an error after its directory was put in place: its summary.json (that of
         the last completed step) says so, with ``running`` false, the ``error`` line and the ``exit_code``
         (``converged`` false when a solve failed). Nothing before the commit: a previous result stays."""
-        if not self.committed:
-            return
-        path = self.file("summary.json")
-        with open(path) as fh:
-            summary = json.load(fh)
-        summary.update(running=False, error=line, exit_code=int(code))
-        if not_converged:
-            summary["converged"] = False
-        replace_json(path, summary)
+        if self.committed:
+            record_failure(self.dir, line, code, not_converged)
 
     def commit(self):
         """Put the staged run in place of the output directory (once, after the first completed step).

@@ -24,6 +24,18 @@ class Table:
     def __call__(self, t):
         return float(np.interp(t, self.times, self.values))
 
+    def first_difference(self, other, until, rtol=1e-12):
+        """Where this table and ``other`` first differ on [0, until]: (t, this one's value, the other's) or
+        None. Two piecewise-linear functions agree on an interval when they agree at its ends and at every
+        breakpoint of either inside it; a difference within rtol of their largest magnitude there is
+        round-off (the same table written another way, ``-0.1*MPa`` or ``-100*kPa``)."""
+        t = np.union1d(self.times, other.times)
+        t = np.union1d(t[(t > 0.0) & (t < until)], [0.0, until])
+        mine, theirs = np.interp(t, self.times, self.values), np.interp(t, other.times, other.values)
+        scale = max(np.max(np.abs(mine)), np.max(np.abs(theirs)))
+        bad = np.nonzero(np.abs(mine - theirs) > rtol * scale)[0]
+        return None if len(bad) == 0 else (float(t[bad[0]]), float(mine[bad[0]]), float(theirs[bad[0]]))
+
 
 class MaterialDrawdown:
     """dp(t) uniform within each material, from per-material tables (None: no change)."""
