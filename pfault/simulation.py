@@ -402,12 +402,13 @@ class Simulation:
         """A step is complete: its checkpoint (when it converged) and the summary so far are written, and the
         first completed step puts the run's directory in place."""
         from .io import checkpoint
-        state = checkpoint.gather(self) if rec["converged"] else None
+        if rec["converged"]:
+            with logged("pfaultCheckpoint"):
+                state = checkpoint.gather(self)
+                run_on_root(self.comm, lambda: checkpoint.write(self.writer.dir, self, step, t, state))
         summary = self._summary(steps, rec["converged"], None, running=True)
 
         def write():
-            if state is not None:
-                checkpoint.write(self.writer.dir, self, step, t, state)
             self.writer.write_summary(summary)
             self.writer.commit()
         run_on_root(self.comm, write)      # a failure to write ends every rank
