@@ -86,8 +86,38 @@ class Block:
         return block
 
 
-def _write_block(ds, start, values):
-    """Write ``values`` into the rows [start, start + len(values)) of ``ds`` (one hyperslab)."""
+def blocks(comm, name, rows):
+    """{kind: Block} of the datasets ``name`` writes, from this rank's {kind: Rows}, once it is checked that the
+    ranks' rows cover each kind's datasets once. Collective (mpi4py ``comm``)."""
+    kinds = sorted(rows)
+    counts = comm.allreduce(np.array([len(rows[k].rows) for k in kinds], dtype=np.int64))
+    bad = {k: (int(n), rows[k].total) for k, n in zip(kinds, counts) if n != rows[k].total}
+    if bad:
+        raise RuntimeError(f"{name}: the ranks' rows do not cover the datasets once (rows, total): {bad}")
+    return {k: Block(comm, rows[k]) for k in kinds}
+
+
+def open_file(comm, path, mode):
+    """``path`` opened by every rank of ``comm`` (mpi4py) with HDF5's MPI-IO driver, without HDF5's file lock
+    where h5py offers that (pfault.io.output.open_h5). Collective."""
+    import h5py
+    try:
+        return h5py.File(path, mode, driver="mpio", comm=comm, locking=False)
+    except TypeError:
+        return h5py.File(path, mode, driver="mpio", comm=comm)
+
+
+def create_dataset(group, name, shape, dtype):
+    """A dataset without fill values: every row is written (fill values would be written first, by all ranks
+    together). Collective."""
+    import h5py
+    dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+    dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)
+    return group.create_dataset(name, shape=shape, dtype=dtype, dcpl=dcpl)
+
+
+def write_block(ds, start, values):
+    """Write ``values`` into the rows [start, start + len(values)) of ``ds`` (one hyperslab; independent)."""
     if len(values):
         ds[start:start + len(values)] = values
 
@@ -100,20 +130,8 @@ class ParallelSeries:
     def __init__(self, comm, directory, name, rows):
         self.comm = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
         self.name, self.rows = name, rows
-        centers = sorted(rows)
-        counts = self.comm.allreduce(np.array([len(rows[c].rows) for c in centers]))
-        bad = {c: (int(n), rows[c].total) for c, n in zip(centers, counts) if n != rows[c].total}
-        if bad:
-            raise RuntimeError(f"{name}: the ranks' rows do not cover the datasets once (rows, total): {bad}")
-        self.blocks = {c: Block(self.comm, rows[c]) for c in centers}
-        self.h5 = run_on_all(self.comm, self._open, os.path.join(directory, name + ".h5"))
-
-    def _open(self, path):
-        import h5py
-        try:
-            return h5py.File(path, "r+", driver="mpio", comm=self.comm, locking=False)
-        except TypeError:
-            return h5py.File(path, "r+", driver="mpio", comm=self.comm)
+        self.blocks = blocks(self.comm, name, rows)
+        self.h5 = run_on_all(self.comm, open_file, self.comm, os.path.join(directory, name + ".h5"), "r+")
 
     def write_step(self, step, t, point_data=None, cell_data=None):
         """Write one step: arrays of this rank's values (local vertices or cells, as its Rows take them).
@@ -139,16 +157,12 @@ class ParallelSeries:
 
     def _create(self, path, step, t, data):
         """The step's group and datasets: [(dataset, first row of this rank's block, its values)]."""
-        import h5py
         grp = self.h5.create_group(path)
         grp.attrs["step"], grp.attrs["time"] = step, t
-        # no fill values: every row is written (fill values would be written first, by all ranks together)
-        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
-        dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)
         datasets = []
         for center, key, value in data:
             rows = self.rows[center]
-            ds = grp.create_dataset(key, shape=(rows.total,) + value.shape[1:], dtype=value.dtype, dcpl=dcpl)
+            ds = create_dataset(grp, key, (rows.total,) + value.shape[1:], value.dtype)
             ds.attrs["center"] = center
             datasets.append((ds, self.blocks[center].start, value))
         return datasets
@@ -156,7 +170,7 @@ class ParallelSeries:
     @staticmethod
     def _fill(datasets):
         for ds, start, value in datasets:
-            _write_block(ds, start, value)
+            write_block(ds, start, value)
 
     def close(self):
         if self.h5 is not None:
