@@ -249,6 +249,7 @@ class Simulation:
         w = self.writer
         self.staging, self.run_path = self.comm.tompi4py().bcast((w.dir, w.path) if self.comm.rank == 0 else None)
         self.output = self._step_output(self.writer)
+        self.checkpoint = self._checkpoint_writer(self.output.parallel)
         if not self.restart_dir:
             self._output(0, 0.0, np.zeros(self.dofmap.n_local), initial=True)
         stage.pop()
@@ -268,6 +269,13 @@ class Simulation:
                           faces=None if faults is None else faults.face,
                           fault_id=None if faults is None else self.fault_id,
                           surface=self.surface if self.comm.rank == 0 else None, parallel=parallel)
+
+    def _checkpoint_writer(self, parallel):
+        """The writer of checkpoint.h5 (every rank); ``parallel``: written by every rank, as the fields are."""
+        from .io import checkpoint
+        faults = self.problem.faults if self.fault_settings else None
+        return checkpoint.Writer(self.comm, self.mesh, faces=None if faults is None else faults.face,
+                                 n_faces=0 if faults is None else len(self.fault_id), parallel_io=parallel)
 
     def _create_writer(self):
         from .io import hazard
@@ -401,11 +409,9 @@ class Simulation:
     def _step_done(self, steps, rec, step, t):
         """A step is complete: its checkpoint (when it converged) and the summary so far are written, and the
         first completed step puts the run's directory in place."""
-        from .io import checkpoint
         if rec["converged"]:
             with logged("pfaultCheckpoint"):
-                state = checkpoint.gather(self)
-                run_on_root(self.comm, lambda: checkpoint.write(self.writer.dir, self, step, t, state))
+                self.checkpoint.write(self.run_path if self.committed else self.staging, self, step, t)
         summary = self._summary(steps, rec["converged"], None, running=True)
 
         def write():

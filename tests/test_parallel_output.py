@@ -72,3 +72,42 @@ def test_parallel_output_equals_the_serial_writer(tmp_path, ranks):
         _, _, fault = reader.read_data(2)
     assert np.array_equal(fault["slip"][0], _datasets(par / "fault.h5")["steps/000002/slip"][0])
     assert os.path.exists(par / "summary.json")
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_parallel_checkpoint_equals_the_gathered_one(tmp_path, ranks):
+    """tests/scripts/parallel_checkpoint.py on the same fault scene with flow (split vertices, Lagrange
+    multipliers, geostatic stress, the previous state, the head and its records): after every step
+    the checkpoint the run writes in parallel and one gathered to rank 0 from the same state are the same file,
+    attribute for attribute and value for value."""
+    par, gathered, own = tmp_path / "run", tmp_path / "gathered", tmp_path / "own"
+    info = run_script("parallel_checkpoint.py", ranks=ranks,
+                      args=[QRO[0], str(gathered), str(own), *QRO[1:], "-pfault_output_dir", str(par)])
+    if not info["h5py_mpi"]:
+        pytest.skip("h5py without MPI: the checkpoint is gathered to rank 0")
+    assert info["parallel"] and info["steps"] == [1, 2]
+    # every rank writes a block of each kind of row, and rows move between the ranks to get there
+    assert sorted(info["blocks"]) == ["cell", "face", "vertex"]
+    for kind, per_rank in info["blocks"].items():
+        assert len(per_rank) == ranks and min(n for n, _ in per_rank) > 0, (kind, per_rank)
+        assert sum(o for _, o in per_rank) > 0, (kind, per_rank)
+    for step in info["steps"]:
+        a, b = _datasets(own / str(step) / "checkpoint.h5"), _datasets(gathered / str(step) / "checkpoint.h5")
+        assert sorted(a) == sorted(b) == [
+            "faults", "faults/pn", "faults/t0", "flow", "flow/head", "flow/history", "sigma0", "u", "u/face",
+            "u/vertex", "u_previous", "u_previous/face", "u_previous/vertex", "u_ref", "u_ref/face",
+            "u_ref/vertex"], step
+        for key in a:
+            (x, xa), (y, ya) = a[key], b[key]
+            assert xa == ya, (step, key)
+            if x is not None:
+                assert x.dtype == y.dtype and x.shape == y.shape and np.array_equal(x, y), (step, key)
+        import h5py
+        with h5py.File(own / str(step) / "checkpoint.h5", "r") as x, \
+                h5py.File(gathered / str(step) / "checkpoint.h5", "r") as y:
+            assert dict(x.attrs) == dict(y.attrs)
+            assert x.attrs["step"] == step and x.attrs["ranks"] == ranks and x.attrs["format"] == 3
+            # values that moved: slipping faces' multipliers, the head, the displacement
+            assert np.abs(x["u/face"][:, 1:]).max() > 1e3 and np.abs(x["flow/head"][()]).max() > 1.0
+            assert np.abs(x["u/vertex"][()]).max() > 1e-2
+    assert not [f for f in os.listdir(par) if f.endswith(".tmp")]

@@ -122,16 +122,22 @@ def test_restart_equals_uninterrupted_run(tmp_path, scene, ranks):
     compare_runs(ref, part, RTOL)
 
 
-def test_restart_on_another_rank_count(tmp_path):
-    """A checkpoint does not depend on the partition: a 1-rank run continued on 2 ranks agrees with the
-    1-rank run to the 1-vs-2-rank agreement of the flow's iterative solver (~1e-10, see
+@pytest.mark.parametrize("written, continued", [(1, 2), (2, 1), (2, 3)])
+def test_restart_on_another_rank_count(tmp_path, written, continued):
+    """A checkpoint does not depend on the partition: a run continued on another number of ranks (from a
+    checkpoint gathered to rank 0 on 1 rank, or written by every rank on 2) agrees with the uninterrupted run
+    to the agreement between rank counts of the flow's iterative solver (~1e-10, see
     tests/test_case_studies.py)."""
+    import h5py
     opts, extra, end, half = SCENES["queretaro"]
     ref, part, cont = tmp_path / "ref", tmp_path / "part", tmp_path / "cont"
-    run_scene(opts, ref, extra=_steps(extra, 4, end))
-    run_scene(opts, part, extra=_steps(extra, 2, half))
-    _, s = run_scene(opts, cont, ranks=2, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part)])
-    assert s["ranks"] == 2 and s["completed_steps"] == [1, 2, 3, 4]
+    run_scene(opts, ref, ranks=written, extra=_steps(extra, 4, end))
+    run_scene(opts, part, ranks=written, extra=_steps(extra, 2, half))
+    with h5py.File(part / "checkpoint.h5", "r") as h5:
+        assert h5.attrs["ranks"] == written and h5.attrs["step"] == 2
+    _, s = run_scene(opts, cont, ranks=continued, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part)])
+    assert s["ranks"] == continued and s["completed_steps"] == [1, 2, 3, 4]
+    assert all(r["slip"] > 0 for r in s["steps"] if r["step"] >= 3)
     compare_runs(ref, cont, 1e-8)
     # the run it continued is left as it was
     with open(part / "summary.json") as fh:
@@ -152,6 +158,27 @@ def test_restart_rejects_a_time_grid_without_the_checkpoint(tmp_path):
                         check=False)
     assert proc.returncode == 1 and "that run had" in proc.stderr
     assert sorted(os.listdir(part)) == before and not os.path.exists(other)
+
+
+def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
+    """A checkpoint of format 2 (fault multipliers per serial cell, u/cell_ids and u/cell) is an input error in
+    one line, before anything is written."""
+    import h5py
+    opts, extra, end, half = SCENES["oedometer"]
+    part = tmp_path / "part"
+    run_scene(opts, part, extra=_steps(extra, 2, half))
+    with h5py.File(part / "checkpoint.h5", "r+") as h5:
+        assert h5.attrs["format"] == 3
+        h5.attrs["format"] = 2
+        h5["u/cell_ids"], h5["u/cell"] = np.zeros(0, np.int64), np.zeros((0, 0))
+    before = {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)}
+    proc, _ = run_scene(opts, part, ranks=2, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part)],
+                        check=False)
+    assert proc.returncode == 1, proc.stderr
+    assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
+        f"pfault: error: -pfault_restart {part}: its checkpoint.h5 has format 2, written by another version of "
+        "pfault; this one reads format 3 (continue that run with the pfault that wrote it, or run it again)"]
+    assert {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)} == before
 
 
 def test_restart_keeps_the_model_but_may_extend_the_loading(tmp_path):

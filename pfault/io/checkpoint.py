@@ -1,12 +1,20 @@
 """The state after the last completed step (``checkpoint.h5``), from which ``-pfault_restart DIR`` continues.
 
-Written after every completed step, whole, into ``checkpoint.h5.tmp`` and then renamed over the old one: a
-checkpoint is either the previous one or the new one, never half of each.
+Written after every completed step, whole, into ``checkpoint.h5.tmp``, which then replaces the old one
+(os.replace, by rank 0 once the file is closed): a checkpoint is either the previous one or the new one, never
+half of each.
 
-Vectors are stored by mesh point in the serial numbering, so a checkpoint does not depend on the partition
-(a run on 2 ranks may continue on 1 or 3): per serial vertex its displacement dofs (6 columns: side 0, then
-the plus side of a split fault vertex, zero elsewhere) and, for the serial cells that carry fault multipliers
-(``cell_ids``), their multipliers (3 per fault face the cell owns, zero-padded to the widest cell).
+Every array is stored by mesh entity in the serial numbering, so a checkpoint does not depend on the
+partition (a run on 2 ranks may continue on 1 or 3): per serial vertex, per serial cell or per serial fault
+face. A vector's displacement dofs are 6 columns per vertex (side 0, then the plus side of a split fault
+vertex, zero elsewhere), its fault multipliers 3 per fault face (those of the face's minus cell; zero on a
+penalty fault's face, which has none).
+
+On more than one rank with h5py built with MPI (pfault.io.parallel.available, the test the field output
+makes) every rank writes its rows (its owned vertices, its cells, the fault faces of its cells), moved first
+into one contiguous block per rank, through HDF5's MPI-IO driver (pfault.io.parallel): no rank holds a whole
+array. Otherwise the arrays are gathered to rank 0, which writes them. The files are the same either way.
+A restart reads the attributes on rank 0 (the checks), then every rank reads the datasets.
 
 What a run carries from one step to the next (pfault.solver.problem.Problem, pfault.faults.interface,
 pfault.solver.flow): the solution u, the initial state u_ref, the initial stress sigma0, each fault face's
@@ -16,226 +24,298 @@ faces' stick/slip/open states are not state: the semismooth law reads them from 
 factorisation are rebuilt at the first solve from the same values.
 
 Contents (datasets; attributes on the root)
-- ``u/vertex``, ``u/cell_ids``, ``u/cell``: the solution (displacements and fault multipliers) at the step's
-  time
+- ``u/vertex`` (serial vertices x 6), ``u/face`` (serial fault faces x 3; scenes with faults): the solution
+  (displacements and fault multipliers) at the step's time
 - ``u_ref/...``: the state at t = 0 (after the geostatic initial state)
 - ``u_previous/...``, attribute ``previous_time``: the state converged before u (a fault scene's predictor
   extrapolates from it), when there is one
-- ``sigma0`` (cells x 9, Pa): the geostatic initial stress, when there is one
+- ``sigma0`` (serial cells x 9, Pa): the geostatic initial stress, when there is one
 - ``faults/t0`` (serial fault faces x 3, Pa, local frame), ``faults/pn`` (serial fault faces, Pa)
 - ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
   ``flow_time``
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``
+
+Format 3. Format 2 (multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and 1 are refused.
 """
 
 from __future__ import annotations
 
 import json
 import os
+from contextlib import contextmanager
 
 import numpy as np
-from mpi4py import MPI
 from petsc4py import PETSc
 
-from ..errors import InputError
+from ..errors import InputError, PfaultError, run_on_all, run_on_root
 from ..mesh import distributed
-from . import run_options
+from . import parallel, run_options
 from .output import TMP_SUFFIX, open_h5
 
-FORMAT = 2                     # 1: the active-set solver's (fault states, predictor)
+FORMAT = 3                     # 2: multipliers per serial cell; 1: the active-set solver's (fault states)
 NAME = "checkpoint.h5"
-CELL_COLUMNS = 12              # up to 4 fault faces per cell, 3 multipliers each
+VERTEX, CELL, FACE = "vertex", "cell", "face"      # what a dataset's rows are
 
 
-# ------------------------------------------------------------------------------------------------------
-# vectors by mesh point
-# ------------------------------------------------------------------------------------------------------
-def point_dofs(dofmap):
-    """Local dofs of each local vertex (nv, 6; -1 where a vertex has a single side) and of each local cell
-    (nc, 12; -1 beyond the cell's multipliers), from the section's layout (pfault.fields)."""
+def vertex_dofs(dofmap):
+    """Local dofs of each local vertex (nv, 6): side 0, then side 1 (-1 where a vertex has a single side)."""
     sides = dofmap.vertex_dofs(0), dofmap.vertex_dofs(1)
-    vdofs = np.concatenate([sides[0], np.where((dofmap.vert_sides > 1)[:, None], sides[1], -1)], axis=1)
-    co = dofmap.cell_offset
-    cdofs = np.full((len(co), CELL_COLUMNS), -1, dtype=np.int64)
-    has = np.nonzero(co >= 0)[0]
-    if len(has):
-        # a cell's multipliers run up to the next point's first dof (points are laid out in chart order)
-        starts = np.unique(np.concatenate([co[has], dofmap.vert_offset, [dofmap.n_local]]))
-        count = starts[np.searchsorted(starts, co[has], side="right")] - co[has]
-        k = np.arange(CELL_COLUMNS)
-        cdofs[has] = np.where(k[None, :] < count[:, None], co[has][:, None] + k[None, :], -1)
-    return vdofs, cdofs
+    return np.concatenate([sides[0], np.where((dofmap.vert_sides > 1)[:, None], sides[1], -1)], axis=1)
 
 
-def gather_local(mesh, dofmap, local):
-    """A local array of the solution -> (vertex (N_v, 6), cell ids (k,), cell values (k, w)) in the serial
-    numbering on rank 0 (None elsewhere): the cells that carry multipliers only, w their largest number.
-    Collective."""
-    vdofs, cdofs = point_dofs(dofmap)
-    width = mesh.dm.getComm().tompi4py().allreduce(int(np.max((cdofs >= 0).sum(axis=1), initial=0)), op=MPI.MAX)
-    v = np.where(vdofs >= 0, local[np.maximum(vdofs, 0)], 0.0)
-    c = np.where(cdofs >= 0, local[np.maximum(cdofs, 0)], 0.0)[:, :width]
-    count = (cdofs >= 0).sum(axis=1)[:, None].astype(float)
-    vertex = distributed.gather_vertex_values(mesh, v)
-    cell = distributed.gather_cell_values(mesh, np.concatenate([count, c], axis=1))
-    if vertex is None:
-        return None
-    ids = np.nonzero(cell[:, 0] > 0)[0]
-    return vertex, ids, cell[ids, 1:]
+def _take(local, dofs):
+    return np.where(dofs >= 0, local[np.maximum(dofs, 0)], 0.0)
 
 
-def scatter_local(mesh, dofmap, vertex, cell_ids, cell):
-    """Inverse of gather_local on any partition: serial arrays (on every rank) -> local array."""
-    vdofs, cdofs = point_dofs(dofmap)
-    out = np.zeros(dofmap.n_local)
-    v = vertex[mesh.vert_serial]
-    out[vdofs[vdofs >= 0]] = v[vdofs >= 0]
-    width = cell.shape[1] if cell.ndim == 2 else 0
-    if width and len(cdofs):
-        rows = np.full(mesh.n_global_cells, -1)
-        rows[cell_ids] = np.arange(len(cell_ids))
-        r = rows[mesh.cell_serial]
-        mine = (cdofs[:, :width] >= 0) & (r >= 0)[:, None]
-        out[cdofs[:, :width][mine]] = cell[np.maximum(r, 0)][:, :width][mine]
-    return out
-
-
-def _to_global(dm, local, gvec):
-    lv = dm.getLocalVec()
-    lv.setArray(local)
-    dm.localToGlobal(lv, gvec, addv=PETSc.InsertMode.INSERT_VALUES)
-    dm.restoreLocalVec(lv)
+def local_state(sim, step, t):
+    """This rank's part of the state of ``sim`` (pfault.simulation.Simulation) after step ``step`` at time t:
+    ({dataset: (VERTEX, CELL or FACE, values per local vertex, local cell or owned fault face)}, root
+    attributes, the flow records as bytes or None). The attributes are the same on every rank. Collective."""
+    p, mesh, dofmap = sim.problem, sim.mesh, sim.dofmap
+    vdofs = vertex_dofs(dofmap)
+    f = p.faults
+    attrs = {"format": FORMAT, "step": int(step), "time_s": float(t), "scene": sim.settings.scene,
+             "ranks": mesh.dm.getComm().getSize(), "nodes": int(mesh.n_global_vertices),
+             "cells": int(mesh.n_global_cells), "fault_faces": int(len(sim.fault_id)) if sim.fault_settings else 0,
+             "dofs": int(p.u.getSize()), "fields": json.dumps(list(dofmap.fields)),
+             "geostatic": bool(sim.settings.geostatic), "flow": sim.flow is not None}
+    data = {}
+    vecs = [("u", p.u), ("u_ref", p.u_ref)]
+    if p.previous is not None:
+        vecs.append(("u_previous", p.previous[1]))
+        attrs["previous_time"] = float(p.previous[0])
+    for name, vec in vecs:
+        local = p.local_array(vec)
+        data[f"{name}/vertex"] = (VERTEX, _take(local, vdofs))
+        if f is not None:
+            data[f"{name}/face"] = (FACE, _take(local, f.lm_dofs))
+    if p.sigma0 is not None:
+        data["sigma0"] = (CELL, np.asarray(p.sigma0, dtype=float).reshape(-1, 9))
+    if f is not None:
+        data["faults/t0"] = (FACE, np.asarray(f.t0, dtype=float))
+        data["faults/pn"] = (FACE, np.asarray(f.pn, dtype=float))
+    history = None
+    if sim.flow is not None:
+        data["flow/head"] = (VERTEX, np.asarray(sim.flow.vertex_head(), dtype=float))
+        # a dataset, not an attribute: a long run's history outgrows HDF5's 64 KiB attribute limit
+        history = json.dumps(sim.flow.history).encode()
+        attrs["flow_time"] = float(sim.flow.time)
+    return data, attrs, history
 
 
 # ------------------------------------------------------------------------------------------------------
 # writing
 # ------------------------------------------------------------------------------------------------------
-def gather(sim):
-    """The state of ``sim`` (pfault.simulation.Simulation) in the serial numbering: {dataset path: array} on
-    rank 0, None elsewhere. Collective."""
-    p, mesh, dofmap = sim.problem, sim.mesh, sim.dofmap
-    out = {}
-    vecs = [("u", p.u), ("u_ref", p.u_ref)]
-    if p.previous is not None:
-        vecs.append(("u_previous", p.previous[1]))
-        out["previous_time"] = p.previous[0]
-    for name, vec in vecs:
-        arrays = gather_local(mesh, dofmap, p.local_array(vec))
-        if arrays is not None:
-            out.update({f"{name}/vertex": arrays[0], f"{name}/cell_ids": arrays[1], f"{name}/cell": arrays[2]})
-    if p.sigma0 is not None:
-        out["sigma0"] = distributed.gather_cell_values(mesh, p.sigma0.reshape(-1, 9))
-    if p.faults is not None:
-        f = p.faults
-        out["faults/t0"] = f.gather_faces(f.t0)
-        out["faults/pn"] = f.gather_faces(f.pn)[:, 0]
-    if sim.flow is not None:
-        out["flow/head"] = distributed.gather_vertex_values(mesh, sim.flow.vertex_head().reshape(-1, 1))
-        # a dataset, not an attribute: a long run's history outgrows HDF5's 64 KiB attribute limit
-        out["flow/history"] = np.frombuffer(json.dumps(sim.flow.history).encode(), dtype=np.uint8)
-        out["flow_time"] = float(sim.flow.time)
-    return out if mesh.dm.getComm().getRank() == 0 else None
+class Writer:
+    """Writes ``checkpoint.h5`` after each completed step: by every rank (``parallel``, see the module
+    docstring) or gathered to rank 0. ``faces``: the serial ids of the fault faces this rank owns (None without
+    faults). Every method is collective."""
+
+    def __init__(self, comm, mesh, faces=None, n_faces=0, parallel_io=False):
+        self.mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
+        self.mesh, self.parallel = mesh, bool(parallel_io)
+        self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
+        self.n_faces = int(n_faces)
+        if not self.parallel:
+            return
+        own = np.flatnonzero(mesh.vert_owned)
+        self.rows = {VERTEX: parallel.Rows(mesh.vert_serial[own], mesh.n_global_vertices, own),
+                     CELL: parallel.Rows(mesh.cell_serial, mesh.n_global_cells)}
+        if self.faces is not None:
+            self.rows[FACE] = parallel.Rows(self.faces, self.n_faces)
+        self.blocks = parallel.blocks(self.mpi, NAME, self.rows)
+
+    def write(self, directory, sim, step, t):
+        """The checkpoint of ``sim`` after step ``step`` at time t, into ``directory`` (known to every rank)."""
+        data, attrs, history = local_state(sim, step, t)
+        path = os.path.join(directory, NAME)
+        if self.parallel:
+            self._write_parallel(path, data, attrs, history)
+        else:
+            arrays = self._gather(data)
+            run_on_root(self.mpi, _write_serial, path, attrs, arrays, history)
+
+    # -- gathered to rank 0 -------------------------------------------------------------------------
+    def _gather(self, data):
+        """{dataset: array in the serial numbering} on rank 0, None elsewhere."""
+        out = {}
+        for name, (kind, values) in data.items():
+            columns = values.reshape(len(values), -1)
+            if kind == VERTEX:
+                whole = distributed.gather_vertex_values(self.mesh, columns)
+            elif kind == CELL:
+                whole = distributed.gather_cell_values(self.mesh, columns)
+            else:
+                parts = self.mpi.gather((self.faces, columns), root=0)
+                whole = None
+                if parts is not None:
+                    whole = np.zeros((self.n_faces, columns.shape[1]))
+                    for faces, v in parts:
+                        whole[faces] = v
+            if whole is not None:
+                out[name] = whole.reshape((len(whole),) + values.shape[1:])
+        return out if self.mpi.rank == 0 else None
+
+    # -- by every rank ------------------------------------------------------------------------------
+    def _write_parallel(self, path, data, attrs, history):
+        blocks = {name: (self.blocks[kind].start,
+                         self.blocks[kind].gather(self.mpi, self.rows[kind].pick(values)))
+                  for name, (kind, values) in data.items()}
+        shapes = {name: (self.rows[kind].total,) + values.shape[1:] for name, (kind, values) in data.items()}
+        # rank 0's records (every rank has the same): their length is metadata, the same on every rank
+        n_history = self.mpi.bcast(None if history is None else len(history), root=0)
+        tmp = path + TMP_SUFFIX
+        with _parallel_file(self.mpi, tmp) as h5:
+            datasets = run_on_all(self.mpi, _create, h5, attrs, shapes, n_history)
+            run_on_all(self.mpi, _fill, datasets, blocks, history if self.mpi.rank == 0 else None)
+        run_on_root(self.mpi, os.replace, tmp, path)
 
 
-def write(directory, sim, step, t, state):
-    """Write ``state`` (from ``gather``) as the checkpoint after step ``step`` at time t, whole
-    (NAME.tmp, then renamed over the old one). Rank 0."""
-    p, mesh = sim.problem, sim.mesh
-    attrs = {"format": FORMAT, "step": int(step), "time_s": float(t), "scene": sim.settings.scene,
-             "ranks": mesh.dm.getComm().getSize(), "nodes": int(mesh.n_global_vertices),
-             "cells": int(mesh.n_global_cells), "fault_faces": int(len(sim.fault_id)) if sim.fault_settings else 0,
-             "dofs": int(p.u.getSize()), "fields": json.dumps(list(sim.dofmap.fields)),
-             "geostatic": bool(sim.settings.geostatic), "flow": sim.flow is not None}
-    for key in ("flow_time", "previous_time"):
-        if key in state:
-            attrs[key] = state[key]
-    path = os.path.join(directory, NAME)
+@contextmanager
+def _parallel_file(comm, path):
+    """``path`` created by every rank with the MPI-IO driver, and closed by every rank at the end (also after an
+    error shared by every rank, which is raised then)."""
+    h5 = run_on_all(comm, parallel.open_file, comm, path, "w")
+    try:
+        yield h5
+    except PfaultError:
+        try:
+            run_on_all(comm, h5.close)
+        except PfaultError:
+            pass                # the first error is the one to tell
+        raise
+    run_on_all(comm, h5.close)
+
+
+def _create(h5, attrs, shapes, n_history):
+    """The attributes and the datasets (the same calls on every rank): {dataset path: dataset}."""
+    for key, value in attrs.items():
+        h5.attrs[key] = value
+    datasets = {name: parallel.create_dataset(h5, name, shape, np.float64) for name, shape in shapes.items()}
+    if n_history is not None:
+        datasets["flow/history"] = parallel.create_dataset(h5, "flow/history", (n_history,), np.uint8)
+    return datasets
+
+
+def _fill(datasets, blocks, history):
+    """This rank's block of every dataset; the flow records from rank 0 (``history`` there, None elsewhere)."""
+    for name, (start, values) in blocks.items():
+        parallel.write_block(datasets[name], start, values)
+    if history is not None:
+        parallel.write_block(datasets["flow/history"], 0, np.frombuffer(history, dtype=np.uint8))
+
+
+def _write_serial(path, attrs, arrays, history):
+    """Rank 0: the checkpoint from serial arrays, whole (NAME.tmp, then renamed over the old one)."""
     with open_h5(path + TMP_SUFFIX, "w") as h5:
         for key, value in attrs.items():
             h5.attrs[key] = value
-        for name, data in state.items():
-            if name not in ("flow_time", "previous_time"):
-                h5.create_dataset(name, data=data)
+        for name, data in arrays.items():
+            h5.create_dataset(name, data=data)
+        if history is not None:
+            h5.create_dataset("flow/history", data=np.frombuffer(history, dtype=np.uint8))
     os.replace(path + TMP_SUFFIX, path)
 
 
 # ------------------------------------------------------------------------------------------------------
 # reading and restoring
 # ------------------------------------------------------------------------------------------------------
-def read(run_dir):
-    """The checkpoint of a run directory as {"attrs": {...}, dataset path: array} (rank 0 calls it)."""
+def _not_readable(run_dir, exc):
+    return InputError(f"-pfault_restart {run_dir}: {NAME} is not readable ({exc})")
+
+
+def read_attrs(run_dir):
+    """The root attributes of a run directory's checkpoint, once its format is checked (rank 0)."""
     path = os.path.join(run_dir, NAME)
     if not os.path.isfile(path):
         raise InputError(f"-pfault_restart {run_dir}: no {NAME} there (a run writes it after each completed "
                          "step)")
     try:
         with open_h5(path, "r") as h5:
-            out = {"attrs": {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}}
+            attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}
+    except OSError as exc:
+        raise _not_readable(run_dir, exc) from None
+    if attrs.get("format") != FORMAT:
+        raise InputError(f"-pfault_restart {run_dir}: its {NAME} has format {attrs.get('format')}, written by "
+                         f"another version of pfault; this one reads format {FORMAT} (continue that run with the "
+                         "pfault that wrote it, or run it again)")
+    return attrs
+
+
+def read_datasets(run_dir):
+    """Every dataset of a run directory's checkpoint: {dataset path: array} (any rank)."""
+    out = {}
+    try:
+        with open_h5(os.path.join(run_dir, NAME), "r") as h5:
             h5.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if hasattr(obj, "shape") else None)
     except OSError as exc:
-        raise InputError(f"-pfault_restart {run_dir}: {NAME} is not readable ({exc})") from None
-    if out["attrs"].get("format") != FORMAT:
-        raise InputError(f"-pfault_restart {run_dir}: {NAME} has format {out['attrs'].get('format')}, this "
-                         f"pfault reads {FORMAT}")
+        raise _not_readable(run_dir, exc) from None
     return out
 
 
-def check(ckpt, run_dir, sim):
-    """InputError where the checkpoint does not belong to this scene and load (rank 0)."""
-    run_options.check_options(run_dir, dict(PETSc.Options().getAll()), float(ckpt["attrs"]["time_s"]),
+def check(attrs, run_dir, sim):
+    """InputError where the checkpoint (its attributes) does not belong to this scene and load (rank 0)."""
+    run_options.check_options(run_dir, dict(PETSc.Options().getAll()), float(attrs["time_s"]),
                               sim.settings.water_density, sim.settings.gravity)
-    a = ckpt["attrs"]
     mine = {"nodes": int(sim.mesh.n_global_vertices), "cells": int(sim.mesh.n_global_cells),
             "fault_faces": int(len(sim.fault_id)) if sim.fault_settings else 0,
             "dofs": int(sim.problem.u.getSize()), "geostatic": bool(sim.settings.geostatic),
             "flow": sim.flow is not None}
     for key, value in mine.items():
-        theirs = a.get(key)
+        theirs = attrs.get(key)
         if (bool(theirs) if isinstance(value, bool) else theirs) != value:
             raise InputError(f"-pfault_restart {run_dir}: its checkpoint has {key} = {theirs}, this scene "
                              f"{value}; restart with the scene and mesh options of that run")
 
 
-def restore(ckpt, sim):
-    """Put the checkpoint's state into the problem (and flow model) of ``sim``; every rank holds ``ckpt``. The
-    time loop then goes on as after the checkpoint's step: its next step's ``begin_step`` measures the faces'
-    start from the restored u under the restored pore pressure."""
+def restore(ckpt, attrs, sim):
+    """Put the checkpoint's state ({dataset path: serial array}, ``attrs``) into the problem (and flow model) of
+    ``sim``; every rank holds them. The time loop then goes on as after the checkpoint's step: its next step's
+    ``begin_step`` measures the faces' start from the restored u under the restored pore pressure."""
     p, mesh, dofmap = sim.problem, sim.mesh, sim.dofmap
+    f = p.faults
+    vdofs = vertex_dofs(dofmap)
 
     def vec(name, out):
-        local = scatter_local(mesh, dofmap, ckpt[f"{name}/vertex"], ckpt[f"{name}/cell_ids"], ckpt[f"{name}/cell"])
-        _to_global(p.dm, local, out)
+        local = np.zeros(dofmap.n_local)
+        v = ckpt[f"{name}/vertex"][mesh.vert_serial]
+        local[vdofs[vdofs >= 0]] = v[vdofs >= 0]
+        if f is not None:
+            lm = f.lm_dofs
+            local[lm[lm >= 0]] = ckpt[f"{name}/face"][f.face][lm >= 0]
+        lv = p.dm.getLocalVec()
+        lv.setArray(local)
+        p.dm.localToGlobal(lv, out, addv=PETSc.InsertMode.INSERT_VALUES)
+        p.dm.restoreLocalVec(lv)
 
     vec("u", p.u)
     vec("u_ref", p.u_ref)
-    p.t_now = float(ckpt["attrs"]["time_s"])
+    p.t_now = float(attrs["time_s"])
     if "u_previous/vertex" in ckpt:
         prev = p.u.duplicate()
         vec("u_previous", prev)
-        p._set_previous(ckpt["attrs"]["previous_time"], prev)
+        p._set_previous(attrs["previous_time"], prev)
         prev.destroy()
     if "sigma0" in ckpt:
         p.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
-    if p.faults is not None:
-        f = p.faults
+    if f is not None:
         f.t0 = ckpt["faults/t0"][f.face].copy()
         f.set_pore_pressure(ckpt["faults/pn"][f.face])
     if sim.flow is not None:
-        sim.flow.restore(ckpt["flow/head"][mesh.vert_serial], ckpt["attrs"]["flow_time"],
+        sim.flow.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
                          json.loads(bytes(ckpt["flow/history"]).decode()))
 
 
 def load(comm, run_dir, sim):
-    """Read the checkpoint on rank 0, check it, share it with every rank and restore it; returns its
+    """Check the checkpoint of ``run_dir`` on rank 0, read it on every rank and restore it; returns its
     attributes. Collective; an InputError is raised on every rank together."""
-    from ..errors import run_on_root
 
     def read_and_check():
-        ckpt = read(run_dir)
-        check(ckpt, run_dir, sim)
-        return ckpt
-    ckpt = run_on_root(comm, read_and_check)
-    ckpt = comm.tompi4py().bcast(ckpt, root=0)
-    restore(ckpt, sim)
-    return ckpt["attrs"]
+        attrs = read_attrs(run_dir)
+        check(attrs, run_dir, sim)
+        return attrs
+    attrs = comm.tompi4py().bcast(run_on_root(comm, read_and_check), root=0)
+    ckpt = run_on_all(comm, read_datasets, run_dir)
+    restore(ckpt, attrs, sim)
+    return attrs

@@ -1,5 +1,6 @@
 """Run output in the serial (partition-independent) numbering, written by rank 0 (on more than one rank the
-per-step datasets of the volume fields and the faults are written by every rank, pfault.io.parallel).
+per-step datasets of the volume fields and the faults, and the checkpoint, are written by every rank,
+pfault.io.parallel).
 
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
 - ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)

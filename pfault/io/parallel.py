@@ -15,6 +15,9 @@ the paper-size calibrated Queretaro scene 8 times slower than gathering it to ra
 file after the collective calls (pfault.io.output.RunWriter.add_steps). An exception on any rank is raised
 on every rank between the collective calls (pfault.errors.run_on_all).
 
+The checkpoint (pfault.io.checkpoint) is written with the same pieces (``Rows``, ``Block``, ``open_file``,
+``create_dataset``, ``write_block``) into a new file after every step.
+
 Used when a run has more than one rank and h5py has MPI (``available``); otherwise the fields are gathered
 to rank 0, as always on one rank. ``GATHER_ENV`` set in the environment forces that path on any number of
 ranks (for tests that compare the two; not an option of pfault).
