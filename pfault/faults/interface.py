@@ -82,7 +82,7 @@ class FaultInterface:
         self.area = np.linalg.norm(an, axis=1)
         self.normal = an / np.maximum(self.area, 1e-300)[:, None]
         self.R = ct.local_frames(self.normal) if nf else np.zeros((0, 3, 3))
-        self._dofs(mesh, dofmap, bc_local, lgmap)
+        self._dofs(mesh, dofmap, bc_local, lgmap, fault_id)
         self.lagrange = np.array([s.method == "lagrange" for s in settings])[self.fault]
         self.has_lagrange = any(s.method == "lagrange" for s in settings)
         self.h = np.sqrt(self.area)
@@ -99,18 +99,21 @@ class FaultInterface:
         self.t_ref_all = np.zeros((self.nf_total, 3))     # t0 of all faces (serial order), set by begin_step
         self.start = StepStart(np.zeros((nf, 3)), np.zeros((nf, 3)), np.full(nf, ct.STICK))
 
-    def _dofs(self, mesh, dofmap, bc_local, lgmap):
+    def _dofs(self, mesh, dofmap, bc_local, lgmap, fault_id):
         nf = self.nf
         self.n_local = dofmap.n_local
         cd = dofmap.cell_dofs.reshape(-1, 4, 3)
         self.minus_dofs = cd[self.cell[:, None], TET_FACES[self.lface]]             # (nf,3,3)
         self.plus_dofs = dofmap.vertex_dofs(1)[self.verts]                            # (nf,3,3)
-        # slot of each face in its cell's multiplier block: faces of a cell in local-face order
+        # slot of each Lagrange face in its cell's multiplier block (the cell carries 3 dofs per Lagrange face
+        # it is the minus cell of, pfault.simulation): its Lagrange faces in local-face order
+        lag_fault = np.array([st.method == "lagrange" for st in self.settings])
         slot = np.zeros(nf, np.int64)
         if nf:
-            before = (mesh.cell_fault_face[self.cell] >= 0) & (np.arange(4)[None, :] < self.lface[:, None])
-            slot = before.sum(axis=1)
-        is_lag = np.array([st.method == "lagrange" for st in self.settings])[self.fault] if nf else np.zeros(0, bool)
+            fid = mesh.cell_fault_face[self.cell]
+            lag_at = (fid >= 0) & lag_fault[fault_id[np.maximum(fid, 0)]]
+            slot = (lag_at & (np.arange(4)[None, :] < self.lface[:, None])).sum(axis=1)
+        is_lag = lag_fault[self.fault] if nf else np.zeros(0, bool)
         self.lm_dofs = np.where(is_lag[:, None], dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None]
                                 + np.arange(3), -1)
         self.u_dofs = np.concatenate([self.minus_dofs.reshape(nf, 9), self.plus_dofs.reshape(nf, 9)], axis=1)
