@@ -6,6 +6,8 @@ same kind ends the process at once (the completed steps are on disk already).
 
 Open MPI's mpirun (4.1) does not pass SIGTERM or SIGINT on as such: it sends the ranks SIGCONT, then SIGTERM
 ``odls_base_sigkill_timeout`` seconds later (default 1) and SIGKILL after as long again, and exits with 1.
+Once it has the signal it also stops reading the ranks' output, so with a longer timeout a rank can block in
+its next progress line until it is killed: the steps completed before are on disk either way.
 It forwards SIGUSR1 untouched: ``kill -USR1 <mpirun pid>`` stops a run after its current step with exit code
 7 (pfault.errors.EXIT_INTERRUPTED), as SIGTERM to the ranks themselves does (what batch systems such as Slurm send).
 """

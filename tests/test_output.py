@@ -199,17 +199,19 @@ def check_killed(run_dir):
     return summary
 
 
-@pytest.mark.parametrize("grace", [None, 10], ids=["default", "grace-10s"])
-def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path, grace):
+def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path):
     """Open MPI 4.1's mpirun does not pass SIGTERM on: it sends the ranks SIGCONT, then SIGTERM
     ``odls_base_sigkill_timeout`` seconds later (default 1) and SIGKILL as long after that, and exits with 1.
-    The signal goes to mpirun once step 1 is on disk (summary.json lists it). With the default second the
-    ranks stop after their step if it ends in time, or are killed in the middle of the next: either way every
-    step completed by the signal is still there and readable, and the directory is what the summary says.
-    Given 10 s (steps of ~0.1-0.3 s here, seconds on a loaded machine: 5 s was exceeded at load 4 on 2 cores),
-    the ranks must have stopped cleanly: summary.json says they were interrupted by SIGTERM after the step they
-    stopped after. The run then continues from its last completed
-    step (one more step of the same length), and the continued directory is whole."""
+    The signal goes to mpirun once step 1 is on disk (summary.json lists it). The ranks stop after their step if
+    it ends in time, or are killed in the middle of the next: either way every step completed by the signal is
+    still there and readable, and the directory is what the summary says. The run then continues from its last
+    completed step (one more step of the same length), and the continued directory is whole.
+
+    A clean stop is not required here: once it has the signal, mpirun stops reading the ranks' output, and a
+    rank that prints a progress line after its pipe has filled blocks until it is killed (seen with a longer
+    ``odls_base_sigkill_timeout``: rank 0 blocked in its progress line, rank 1 waiting for it to close a file).
+    The clean stop is tested with SIGTERM to a rank and SIGUSR1 to mpirun
+    (test_interrupted_run_is_readable_and_restarts)."""
     run_dir = str(tmp_path / "run")
     # 600 steps of 0.01 year: the run lasts minutes; it is stopped after some tens
     opts = [*QRO_OPTS[:4], "-pfault_time_steps", "600", "-pfault_time_end", "6*year", "-pfault_figures", "false"]
@@ -220,13 +222,10 @@ def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path, grace):
         os.kill(proc.pid, signal.SIGTERM)
 
     code, out, err = start_and_signal([QRO, "-pfault_output_dir", run_dir, *opts], 2, send,
-                                      ready=lambda: bool(completed_on_disk(run_dir)),
-                                      mpirun_args=[] if grace is None else ["--mca", "odls_base_sigkill_timeout",
-                                                                            str(grace)])
+                                      ready=lambda: bool(completed_on_disk(run_dir)))
     assert code != 0, out[-2000:] + err[-2000:]
     with open(os.path.join(run_dir, "summary.json")) as fh:
         interrupted = json.load(fh)["interrupted"]
-    assert interrupted or grace is None, f"SIGTERM did not stop the ranks within {grace} s:\n{out[-2000:]}{err[-2000:]}"
     if interrupted:
         summary = check_readable(run_dir)
         k = summary["completed_steps"][-1]
