@@ -685,8 +685,9 @@ brackets; *sub-steps* counts the steps that did not converge at once and were re
 The invariant is what shows the answer is right: an analytic value, a symmetry of the mesh and the scene,
 path independence under proportional loading, agreement between rank counts, or, for penalty faces, the answer
 closing on the Lagrange one as k grows until it is within the share the Lagrange faces' stabilisation moves
-theirs by (2-3 % here), and changing as 1/k beyond (order 1 in k). A row passes when it converged and its invariant holds. Every case runs with its
-scene's defaults and `-pfault_contact_monitor`; no solver option is given."""
+theirs by (2-3 % here), and changing as 1/k beyond (order 1 in k). A row passes when it converged and its
+invariant holds. Every case runs with its scene's defaults and `-pfault_contact_monitor`; no solver option is
+given."""
 
 
 def write_report(results, selected, meta, path):
