@@ -333,7 +333,8 @@ class Problem:
 
     # -- solving -----------------------------------------------------------------------------------
     def create_snes(self):
-        apply_solver_defaults(linear=self.faults is None)
+        penalty = self.faults is not None and any(s.method == "penalty" for s in self.faults.settings)
+        apply_solver_defaults(linear=self.faults is None, penalty=penalty)
         snes = PETSc.SNES().create(comm=self.comm)
         snes.setDM(self.dm)
         snes.getKSP().setDMActive(False)

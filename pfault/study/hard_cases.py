@@ -258,19 +258,51 @@ def rank_agreement(ref, tol=1e-8):
                      f"than one rank", f"<= {tol:g}", evaluate, (ref,))
 
 
-def penalty_vs_lagrange(ref, softer, last, tol_last=1e-2):
-    """Penalty against the Lagrange run ``ref``: the difference of the final opening/slip fields decreases with k
-    (below every softer penalty run that ran), and at the stiffest k is at most ``tol_last``."""
+def penalty_vs_lagrange(ref, softer):
+    """Penalty against the Lagrange run ``ref`` while the penalty's own error dominates (k up to 100 E/h): the
+    difference of the final opening/slip fields decreases with k (below every softer penalty run that ran)."""
     def evaluate(res, runs):
         value = _rel(_jumps(res), _jumps(runs[ref]))
         prev = [runs[s].verdict.value for s in softer if s in runs and getattr(runs[s], "verdict", None) is not None
                 and runs[s].verdict.value is not None]
-        ok = all(value < v for v in prev) and (not last or value <= tol_last)
         note = f"softer k: {', '.join(f'{v:.3g}' for v in prev)}" if prev else ""
-        return Verdict(value, ok, note)
-    bound = "below the softer k" + (f", <= {tol_last:g}" if last else "")
-    return Invariant(f"final opening/slip fields vs Lagrange `{ref}` (relative difference)", bound, evaluate,
-                     (ref, *softer))
+        return Verdict(value, all(value < v for v in prev), note)
+    return Invariant(f"final opening/slip fields vs Lagrange `{ref}` (relative difference)", "below the softer k",
+                     evaluate, (ref, *softer))
+
+
+# Penalty faces at k -> infinity hold the faces' average jumps, as the multipliers do, but without the Lagrange
+# faces' traction-jump stabilisation (pfault.faults.stabilization, S at 1 % of the compliance estimate), which
+# moves the Lagrange answer by a share proportional to S. Fissure box, penalty at 1e4 E/h against Lagrange at S =
+# 1 %, 0.1 %, 0.01 % of the compliance: 2.4e-2, 2.7e-3, 3.0e-4 at h, 3.3e-2, 4.2e-3, 3.9e-4 at h/2.
+STABILISATION_GAP = 0.05
+
+
+def penalty_gap(ref, tol=STABILISATION_GAP):
+    """Penalty against the Lagrange run ``ref`` once the penalty's own error is below the Lagrange faces'
+    stabilisation share: the difference of the final opening/slip fields at most ``tol``."""
+    def evaluate(res, runs):
+        value = _rel(_jumps(res), _jumps(runs[ref]))
+        return Verdict(value, value <= tol)
+    return Invariant(f"final opening/slip fields vs Lagrange `{ref}` (relative difference; the Lagrange faces' "
+                     "stabilisation alone leaves 2-3 %)", f"<= {tol:g}", evaluate, (ref,))
+
+
+def penalty_rate_in_k(ref, rungs, ratio, lo=0.9, hi=1.1, gap=STABILISATION_GAP):
+    """Penalty error ~ 1/k: with runs at k / ratio^2, k / ratio (``rungs``) and k, the changes of the final
+    opening/slip fields between successive runs shrink by ``ratio`` (order log(d1 / d2) / log(ratio) in
+    [lo, hi]); and the answer is within ``gap`` of the Lagrange run ``ref`` (its stabilisation's share)."""
+    def evaluate(res, runs):
+        a, b, c = _jumps(runs[rungs[0]]), _jumps(runs[rungs[1]]), _jumps(res)
+        d1, d2 = float(np.linalg.norm(b - a)), float(np.linalg.norm(c - b))
+        order = math.log(d1 / d2) / math.log(ratio) if d1 > 0 and d2 > 0 else None
+        to_lagrange = _rel(c, _jumps(runs[ref]))
+        ok = order is not None and lo <= order <= hi and to_lagrange <= gap
+        return Verdict(order, ok, f"changes {d1 / np.linalg.norm(c):.3g}, {d2 / np.linalg.norm(c):.3g}; "
+                       f"vs Lagrange {to_lagrange:.3g}")
+    return Invariant(f"order in k of the final opening/slip fields (changes from `{rungs[0]}` to `{rungs[1]}` to "
+                     f"this run); and vs Lagrange `{ref}` (relative difference)", f"{lo:g} to {hi:g}; <= {gap:g}",
+                     evaluate, (ref, *rungs))
 
 
 def _opt(*pairs):
@@ -360,16 +392,19 @@ def _step_cases():
 
 def _penalty_cases():
     out = []
-    factors = (1e-2, 1.0, 1e2, 1e4)
-    for i, m in enumerate(factors):
-        name = f"penalty_{m:g}_E_over_h"
-        out.append(Case(name, f"fissure box, penalty k = {m:g} E/h = {m * E_OVER_H:.3g} Pa/m", FISSURE,
-                        penalty_vs_lagrange("zero_strength_fissure", [f"penalty_{s:g}_E_over_h" for s in factors[:i]],
-                                            last=m == 1e4),
-                        penalty("fissure", m * E_OVER_H), quick=m in (1e-2, 1e4)))
+    name = "penalty_{:g}_E_over_h".format
+    lagrange = "zero_strength_fissure"
+    for m in (1e-2, 1.0, 1e2):
+        out.append(Case(name(m), f"fissure box, penalty k = {m:g} E/h = {m * E_OVER_H:.3g} Pa/m", FISSURE,
+                        penalty_vs_lagrange(lagrange, [name(s) for s in (1e-2, 1.0) if s < m]),
+                        penalty("fissure", m * E_OVER_H), quick=m == 1e-2))
+    out.append(Case(name(1e3), f"fissure box, penalty k = 1000 E/h = {1e3 * E_OVER_H:.3g} Pa/m", FISSURE,
+                    penalty_gap(lagrange), penalty("fissure", 1e3 * E_OVER_H)))
+    out.append(Case(name(1e4), f"fissure box, penalty k = 10000 E/h = {1e4 * E_OVER_H:.3g} Pa/m", FISSURE,
+                    penalty_rate_in_k(lagrange, (name(1e2), name(1e3)), 10.0), penalty("fissure", 1e4 * E_OVER_H),
+                    quick=True))
     out.append(Case("penalty_100_E_over_h_h2", f"fissure box at h/2, penalty k = 100 E/h = "
-                    f"{100 * E_OVER_H_FINE:.3g} Pa/m", FISSURE,
-                    penalty_vs_lagrange("proportional_10_steps_h2", [], last=True),
+                    f"{100 * E_OVER_H_FINE:.3g} Pa/m", FISSURE, penalty_gap("proportional_10_steps_h2"),
                     FISSURE_FINE + penalty("fissure", 100 * E_OVER_H_FINE)))
     return out
 
@@ -648,9 +683,11 @@ is the number of Newton iterations over all steps, each step's elastic trial inc
 brackets; *sub-steps* counts the steps that did not converge at once and were retried as 2, 4, 8 sub-steps;
 *LU* counts MUMPS factorisations; *wall* is the end-to-end time of the mpirun (start-up and output included).
 The invariant is what shows the answer is right: an analytic value, a symmetry of the mesh and the scene,
-path independence under proportional loading, agreement between rank counts, or the penalty answer closing on
-the Lagrange one as k grows. A row passes when it converged and its invariant holds. Every case runs with its
-scene's defaults and `-pfault_contact_monitor`; no solver option is given."""
+path independence under proportional loading, agreement between rank counts, or, for penalty faces, the answer
+closing on the Lagrange one as k grows until it is within the share the Lagrange faces' stabilisation moves
+theirs by (2-3 % here), and changing as 1/k beyond (order 1 in k). A row passes when it converged and its
+invariant holds. Every case runs with its scene's defaults and `-pfault_contact_monitor`; no solver option is
+given."""
 
 
 def write_report(results, selected, meta, path):
