@@ -199,6 +199,18 @@ def check_killed(run_dir):
     return summary
 
 
+def continue_one_more_step(run_dir, k, at_signal):
+    """A run of 0.01-year steps stopped after step k (at least the steps on disk when it was signalled) continues
+    from its checkpoint for one more step of the same length, and its directory is then whole."""
+    assert at_signal and at_signal[-1] <= k < 600
+    more = [*QRO_OPTS[:4], "-pfault_time_steps", str(k + 1), "-pfault_time_end", f"{(k + 1) / 100}*year",
+            "-pfault_restart", run_dir]
+    _, s = run_scene(QRO, run_dir, ranks=2, extra=more)
+    assert s["completed_steps"] == list(range(1, k + 2)) and s["restart"]["step"] == k
+    assert not s["running"] and not s["interrupted"] and s["converged"]
+    check_readable(run_dir)
+
+
 def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path):
     """Open MPI 4.1's mpirun does not pass SIGTERM on: it sends the ranks SIGCONT, then SIGTERM
     ``odls_base_sigkill_timeout`` seconds later (default 1) and SIGKILL as long after that, and exits with 1.
@@ -237,13 +249,7 @@ def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path):
     else:
         summary = check_killed(run_dir)
         k = summary["completed_steps"][-1]
-    assert at_signal and at_signal[-1] <= k < 600
-    more = [*QRO_OPTS[:4], "-pfault_time_steps", str(k + 1), "-pfault_time_end", f"{(k + 1) / 100}*year",
-            "-pfault_restart", run_dir]
-    _, s = run_scene(QRO, run_dir, ranks=2, extra=more)
-    assert s["completed_steps"] == list(range(1, k + 2)) and s["restart"]["step"] == k
-    assert not s["running"] and not s["interrupted"] and s["converged"]
-    check_readable(run_dir)
+    continue_one_more_step(run_dir, k, at_signal)
 
 
 def test_killed_run_leaves_completed_steps(tmp_path):
@@ -265,12 +271,7 @@ def test_killed_run_leaves_completed_steps(tmp_path):
     assert code != 0 and "received" not in err
     summary = check_killed(run_dir)
     k = summary["completed_steps"][-1]
-    assert at_signal and at_signal[-1] <= k < 600
-    more = [*QRO_OPTS[:4], "-pfault_time_steps", str(k + 1), "-pfault_time_end", f"{(k + 1) / 100}*year",
-            "-pfault_restart", run_dir]
-    _, s = run_scene(QRO, run_dir, ranks=2, extra=more)
-    assert s["completed_steps"] == list(range(1, k + 2)) and s["restart"]["step"] == k
-    check_readable(run_dir)
+    continue_one_more_step(run_dir, k, at_signal)
 
 
 # ------------------------------------------------------------------------------------------------------
