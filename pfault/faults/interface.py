@@ -82,8 +82,8 @@ class FaultInterface:
         self.area = np.linalg.norm(an, axis=1)
         self.normal = an / np.maximum(self.area, 1e-300)[:, None]
         self.R = ct.local_frames(self.normal) if nf else np.zeros((0, 3, 3))
-        self._dofs(mesh, dofmap, bc_local, lgmap, fault_id)
         self.lagrange = np.array([s.method == "lagrange" for s in settings])[self.fault]
+        self._dofs(mesh, dofmap, bc_local, lgmap, fault_id)
         self.has_lagrange = any(s.method == "lagrange" for s in settings)
         self.h = np.sqrt(self.area)
         self.young = np.array([m.young_modulus for m in materials])[mesh.cell_material[self.cell]]
@@ -113,8 +113,7 @@ class FaultInterface:
             fid = mesh.cell_fault_face[self.cell]
             lag_at = (fid >= 0) & lag_fault[fault_id[np.maximum(fid, 0)]]
             slot = (lag_at & (np.arange(4)[None, :] < self.lface[:, None])).sum(axis=1)
-        is_lag = lag_fault[self.fault] if nf else np.zeros(0, bool)
-        self.lm_dofs = np.where(is_lag[:, None], dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None]
+        self.lm_dofs = np.where(self.lagrange[:, None], dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None]
                                 + np.arange(3), -1)
         self.u_dofs = np.concatenate([self.minus_dofs.reshape(nf, 9), self.plus_dofs.reshape(nf, 9)], axis=1)
         self.sign = np.concatenate([-np.ones(9), np.ones(9)])                        # jump = plus - minus

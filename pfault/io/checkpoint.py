@@ -284,10 +284,7 @@ def restore(ckpt, attrs, sim):
         if f is not None:
             lm = f.lm_dofs
             local[lm[lm >= 0]] = ckpt[f"{name}/face"][f.face][lm >= 0]
-        lv = p.dm.getLocalVec()
-        lv.setArray(local)
-        p.dm.localToGlobal(lv, out, addv=PETSc.InsertMode.INSERT_VALUES)
-        p.dm.restoreLocalVec(lv)
+        p._to_global(local, PETSc.InsertMode.INSERT_VALUES, out=out)
 
     vec("u", p.u)
     vec("u_ref", p.u_ref)
