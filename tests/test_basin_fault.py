@@ -57,3 +57,33 @@ def test_one_and_two_ranks_agree(basin):
     s2, _ = basin[2]
     for key in ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m"):
         assert s2[key] == pytest.approx(s1[key], rel=1e-6), key
+
+
+@pytest.fixture(scope="module")
+def basin_mesh(basin):
+    return str(basin[1][1].parent / "basin.msh")
+
+
+@pytest.mark.parametrize("method", ["lagrange", "penalty"])
+def test_geostatic_state_is_in_equilibrium_on_an_inclined_fault(basin_mesh, tmp_path, method):
+    """The K0 initial stress puts shear on the 60-degree fault (0.58 MPa on average). With a friction angle of 60
+    degrees no face exceeds its Coulomb limit, and a step without drawdown must leave the state as it was: zero
+    displacement, the same tractions. Both methods start their faces from the initial traction (penalty faces
+    too: their shear starts from the initial one, not from zero), and the step converges though its load is
+    zero (the gravity load scales its tolerance)."""
+    import meshio
+    out = tmp_path / method
+    _, s = run_scene("config/basin_fault.opts", out, ranks=2,
+                     extra=["-pfault_mesh_file", basin_mesh, "-pfault_fault_fault_method", method,
+                            "-pfault_fault_fault_friction_angle", "60", "-pfault_time_steps", "1",
+                            "-pfault_time_end", "1*year", "-pfault_material_basin_head_drawdown", "0:0,1*year:0",
+                            "-pfault_time_max_cuts", "0"])
+    assert s["converged"] and s["steps"][-1]["newton_its"] <= 2
+    assert s["max_subsidence_m"] < 1e-12 and s["max_horizontal_displacement_m"] < 1e-12
+    reader = meshio.xdmf.TimeSeriesReader(str(out / "fault.xdmf"))
+    reader.read_points_cells()
+    shear = [np.asarray(reader.read_data(k)[2]["traction_shear"][0]) for k in range(reader.num_steps)]
+    mean = np.linalg.norm(shear[0], axis=1).mean()
+    assert mean > 2e5, mean                          # the initial shear is there at step 0
+    assert np.abs(shear[-1] - shear[0]).max() <= 1e-9 * np.abs(shear[0]).max()
+    assert s["steps"][-1]["slip"] == 0 and s["steps"][-1]["open"] == 0

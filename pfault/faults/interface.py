@@ -225,6 +225,16 @@ class FaultInterface:
         self.start = StepStart(g, t, self.start.state)     # the states are measured from this start
         self.start = StepStart(g, t, self.states(x_loc, exact=True))
 
+    def start_from(self, x_loc, t):
+        """Start the faces' laws at the state x_loc from the total tractions ``t`` (owned faces, local frame):
+        the initial traction t0 of a geostatic state, or the tractions a checkpoint recorded. A penalty face's
+        tangential traction is its history's return map, not a function of its jump; Lagrange faces read
+        theirs from their multipliers. Then ``begin_step`` at x_loc."""
+        gl = self.jumps(x_loc)[1]
+        g = np.where(self.lagrange[:, None], self.start.g, gl)
+        self.start = StepStart(g, np.array(t, dtype=float), self.start.state)
+        self.begin_step(x_loc)
+
     def initial_tractions(self, sigma0):
         """Multipliers of the initial state: the prestress of the minus cell projected on the face (local frame;
         the prestress is continuous across a fault in a layered initial state)."""

@@ -18,8 +18,9 @@ A restart reads the attributes on rank 0 (the checks), then every rank reads the
 
 What a run carries from one step to the next (pfault.solver.problem.Problem, pfault.faults.interface,
 pfault.solver.flow): the solution u, the initial state u_ref, the initial stress sigma0, each fault face's
-initial traction ``t0`` and the pore pressure alpha p its contact law saw in the step (``pn``, which the next
-step's ``begin_step`` measures the faces' start state under), and the flow model's head, time and records. The
+initial traction ``t0``, its traction (a penalty face's shear depends on its history) and the pore pressure
+alpha p its contact law saw in the step (``pn``, which the next step's ``begin_step`` measures the faces' start
+state under), and the flow model's head, time and records. The
 faces' stick/slip/open states are not state: the semismooth law reads them from u. The Jacobian and its
 factorisation are rebuilt at the first solve from the same values.
 
@@ -30,13 +31,16 @@ Contents (datasets; attributes on the root)
 - ``u_previous/...``, attribute ``previous_time``: the state converged before u (a fault scene's predictor
   extrapolates from it), when there is one
 - ``sigma0`` (serial cells x 9, Pa): the geostatic initial stress, when there is one
-- ``faults/t0`` (serial fault faces x 3, Pa, local frame), ``faults/pn`` (serial fault faces, Pa)
+- ``faults/t0`` (serial fault faces x 3, Pa, local frame), ``faults/pn`` (serial fault faces, Pa),
+  ``faults/traction`` (serial fault faces x 3, Pa, local frame): the faces' total tractions at the step's time
+  (a penalty face's shear is the return map of its history, which its jump alone does not give)
 - ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
   ``flow_time``
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``
 
-Format 3. Format 2 (multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and 1 are refused.
+Format 4. Format 3 (without ``faults/traction``), 2 (multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and
+1 are refused.
 """
 
 from __future__ import annotations
@@ -53,7 +57,7 @@ from ..mesh import distributed
 from . import parallel, run_options
 from .output import TMP_SUFFIX, open_h5
 
-FORMAT = 3                     # 2: multipliers per serial cell; 1: the active-set solver's (fault states)
+FORMAT = 4                     # 3: no faults/traction; 2: multipliers per serial cell; 1: fault states
 NAME = "checkpoint.h5"
 VERTEX, CELL, FACE = "vertex", "cell", "face"      # what a dataset's rows are
 
@@ -95,6 +99,7 @@ def local_state(sim, step, t):
     if f is not None:
         data["faults/t0"] = (FACE, np.asarray(f.t0, dtype=float))
         data["faults/pn"] = (FACE, np.asarray(f.pn, dtype=float))
+        data["faults/traction"] = (FACE, np.asarray(f.tractions(p.local_array(p.u)), dtype=float))
     history = None
     if sim.flow is not None:
         data["flow/head"] = (VERTEX, np.asarray(sim.flow.vertex_head(), dtype=float))
@@ -299,6 +304,7 @@ def restore(ckpt, attrs, sim):
     if f is not None:
         f.t0 = ckpt["faults/t0"][f.face].copy()
         f.set_pore_pressure(ckpt["faults/pn"][f.face])
+        f.start_from(p.local_array(p.u), ckpt["faults/traction"][f.face])
     if sim.flow is not None:
         sim.flow.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
                          json.loads(bytes(ckpt["flow/history"]).decode()))

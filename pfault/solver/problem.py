@@ -76,6 +76,7 @@ class Problem:
         self.F = self.u.duplicate()
         self.static_local = np.zeros(dofmap.n_local)
         self.sigma0 = None
+        self._gravity_norm = None       # of the gravity load of a geostatic initial state (_load_tolerance)
         self._dp_interval = None
         self._jacobian_key = None       # faces' states of the assembled J while it depends on nothing else
         self._trial = None              # faces' states of a step's elastic trial while it is solved
@@ -224,10 +225,8 @@ class Problem:
         s = self.settings
         if self.faults is not None:
             self.faults.set_pore_pressure(self.face_pore_pressure(0.0))
-        grav = np.zeros(self.dofmap.n_local)
-        self.asm.gravity_load(s.gravity, grav)
-        self._to_global(grav, out=self.f)
-        self.f.getArray()[self.bc_local_owned] = 0.0
+        self._gravity_load(self.f)
+        self._gravity_norm = self.f.norm()
         ug = self.u.duplicate()
         self._solve_gravity(snes, ug)
         sig = self.asm.effective_stress(self.local_array(ug))
@@ -273,7 +272,7 @@ class Problem:
         lag = np.nonzero(f.lagrange)[0]
         loc[f.lm_dofs[lag]] = f.t0[lag]
         self._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=self.u)
-        f.begin_step(loc)
+        f.start_from(loc, f.t0)     # penalty faces too: their shear starts from the initial one
 
     # -- SNES callbacks --------------------------------------------------------------------------
     def residual(self, snes, x, F):
@@ -455,12 +454,39 @@ class Problem:
             self._trial = None
 
     def _load_tolerance(self, snes):
-        """Unless -snes_atol is given: a step also converges once |F| <= -snes_rtol |f|, the load at the step's
-        time (a step that changes little starts from a residual near round-off of the previous one)."""
+        """Unless -snes_atol is given: a step also converges once |F| <= -snes_rtol times the forces of the
+        problem: the larger of the load at the step's time |f|, the internal forces of the state it starts from
+        |K u| and, in a geostatic scene, the gravity load the initial stress carries. A step that changes
+        little starts from a residual near round-off of the previous one; one that changes nothing at zero
+        load (a plateau of the drawdown at zero, the heads recovered) has only those forces to scale its
+        round-off: its load is zero."""
         if self._atol_user:
             return
+        ku = self.u.duplicate()
+        self.K.mult(self.u, ku)
+        scale = max(self.f.norm(), ku.norm(), self._gravity_load_norm())
+        ku.destroy()
         rtol, _, stol, max_it = snes.getTolerances()
-        snes.setTolerances(rtol=rtol, atol=max(rtol * self.f.norm(), 1e-300), stol=stol, max_it=max_it)
+        snes.setTolerances(rtol=rtol, atol=max(rtol * scale, 1e-300), stol=stol, max_it=max_it)
+
+    def _gravity_load_norm(self):
+        """|gravity load| of a geostatic scene (0 otherwise), as geostatic_prestress assembles it; a restarted
+        run computes it again."""
+        if self._gravity_norm is None:
+            self._gravity_norm = 0.0
+            if self.settings.geostatic:
+                g = self.u.duplicate()
+                self._gravity_load(g)
+                self._gravity_norm = g.norm()
+                g.destroy()
+        return self._gravity_norm
+
+    def _gravity_load(self, out):
+        """The gravity load vector (zero on constrained dofs) into ``out``."""
+        grav = np.zeros(self.dofmap.n_local)
+        self.asm.gravity_load(self.settings.gravity, grav)
+        self._to_global(grav, out=out)
+        out.getArray()[self.bc_local_owned] = 0.0
 
     def solve_interval(self, snes, t_prev, t, max_cuts=0):
         """Advance from t_prev to t. A step whose Newton solve does not converge is retried from the state at
