@@ -57,7 +57,7 @@ for _ in range(repeat):
     for name, writer in writers.items():
         mpi.Barrier()
         t0 = time.perf_counter()
-        writer.write(directory, sim, step, t)
+        writer.write(directory, sim, step, t, summary["steps"])
         mpi.Barrier()
         times[name].append(time.perf_counter() - t0)
 size = os.path.getsize(os.path.join(directory, checkpoint.NAME)) if mpi.rank == 0 else 0

@@ -389,8 +389,7 @@ class Simulation:
         """State, step records and place on the time grid of the run in -pfault_restart: returns (records,
         grid index of the checkpoint's time, step number minus grid index)."""
         from .io import checkpoint
-        from .io.output import read_summary_steps
-        attrs = checkpoint.load(self.comm, self.restart_dir, self)
+        attrs, records = checkpoint.load(self.comm, self.restart_dir, self)
         step, t = int(attrs["step"]), float(attrs["time_s"])
         index = int(np.argmin(np.abs(times - t)))
         if abs(times[index] - t) > 1e-9 * times[-1]:
@@ -400,8 +399,7 @@ class Simulation:
         if index == len(times) - 1:
             raise InputError(f"-pfault_restart {self.restart_dir}: the run is complete at t = {t:g} s; give a "
                              "later -pfault_time_end to continue it")
-        steps = run_on_root(self.comm, read_summary_steps, self.restart_dir, step)
-        steps = self.comm.tompi4py().bcast(steps, root=0)
+        steps = [r for r in records if "step" in r and r["step"] <= step]
         self.restart_step = step
         _print(f"pfault: continuing {self.restart_dir} after step {step} (t = {_fmt_time(t).strip()})")
         return steps, index, step - index
@@ -411,7 +409,7 @@ class Simulation:
         first completed step puts the run's directory in place."""
         if rec["converged"]:
             with logged("pfaultCheckpoint"):
-                self.checkpoint.write(self.run_path if self.committed else self.staging, self, step, t)
+                self.checkpoint.write(self.run_path if self.committed else self.staging, self, step, t, steps)
         summary = self._summary(steps, rec["converged"], None, running=True)
 
         def write():

@@ -179,7 +179,9 @@ def completed_on_disk(run_dir):
 def check_killed(run_dir):
     """A run directory as a run killed during a step leaves it: summary.json and checkpoint.h5 of its last
     completed step, and in each series every completed step, readable, and at most the fields of the step in
-    progress besides (flushed before it was killed); returns the summary."""
+    progress besides (flushed before it was killed); returns the summary and the checkpoint's step. A run
+    killed between a step's checkpoint and its summary has a checkpoint one step ahead of summary.json, with
+    the step records up to its own step, from which it continues."""
     import h5py
     with open(os.path.join(run_dir, "summary.json")) as fh:
         summary = json.load(fh)
@@ -195,8 +197,11 @@ def check_killed(run_dir):
             written = sorted(int(k) for k in h5["steps"])
         assert written in ([0] + done, [0] + done + [done[-1] + 1]) and len(written) >= len(steps), name
     with h5py.File(os.path.join(run_dir, "checkpoint.h5"), "r") as h5:
-        assert h5.attrs["step"] == done[-1]
-    return summary
+        step = int(h5.attrs["step"])
+        records = json.loads(bytes(h5["steps"][()]).decode())
+    assert step in (done[-1], done[-1] + 1)
+    assert [r["step"] for r in records if r["step"] > 0] == list(range(1, step + 1))
+    return summary, step
 
 
 def continue_one_more_step(run_dir, k, at_signal):
@@ -247,8 +252,7 @@ def test_sigterm_to_mpirun_leaves_completed_steps(tmp_path):
             f"pfault: SIGTERM received (rank {r}): stopping after the current step (send it again to stop at once)"
             for r in (0, 1)]
     else:
-        summary = check_killed(run_dir)
-        k = summary["completed_steps"][-1]
+        _, k = check_killed(run_dir)
     continue_one_more_step(run_dir, k, at_signal)
 
 
@@ -269,8 +273,7 @@ def test_killed_run_leaves_completed_steps(tmp_path):
     code, out, err = start_and_signal([QRO, "-pfault_output_dir", run_dir, *opts], 2, kill,
                                       ready=lambda: bool(completed_on_disk(run_dir)))
     assert code != 0 and "received" not in err
-    summary = check_killed(run_dir)
-    k = summary["completed_steps"][-1]
+    _, k = check_killed(run_dir)
     continue_one_more_step(run_dir, k, at_signal)
 
 

@@ -36,10 +36,12 @@ Contents (datasets; attributes on the root)
   (a penalty face's shear is the return map of its history, which its jump alone does not give)
 - ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
   ``flow_time``
+- ``steps``: the run's step records up to the checkpoint's step (JSON as bytes), those of summary.json: a run
+  killed between its checkpoint and its summary continues from the checkpoint with its records
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``
 
-Format 4. Format 3 (without ``faults/traction``), 2 (multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and
+Format 4. Format 3 (without ``faults/traction`` and ``steps``), 2 (multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and
 1 are refused.
 """
 
@@ -72,10 +74,11 @@ def _take(local, dofs):
     return np.where(dofs >= 0, local[np.maximum(dofs, 0)], 0.0)
 
 
-def local_state(sim, step, t):
+def local_state(sim, step, t, records):
     """This rank's part of the state of ``sim`` (pfault.simulation.Simulation) after step ``step`` at time t:
     ({dataset: (VERTEX, CELL or FACE, values per local vertex, local cell or owned fault face)}, root
-    attributes, the flow records as bytes or None). The attributes are the same on every rank. Collective."""
+    attributes, {dataset: JSON as bytes}: the step records ``records`` and the flow model's). The attributes and
+    the JSON are the same on every rank. Collective."""
     p, mesh, dofmap = sim.problem, sim.mesh, sim.dofmap
     vdofs = vertex_dofs(dofmap)
     f = p.faults
@@ -100,13 +103,13 @@ def local_state(sim, step, t):
         data["faults/t0"] = (FACE, np.asarray(f.t0, dtype=float))
         data["faults/pn"] = (FACE, np.asarray(f.pn, dtype=float))
         data["faults/traction"] = (FACE, np.asarray(f.tractions(p.local_array(p.u)), dtype=float))
-    history = None
+    # datasets, not attributes: a long run's records outgrow HDF5's 64 KiB attribute limit
+    texts = {"steps": json.dumps(records).encode()}
     if sim.flow is not None:
         data["flow/head"] = (VERTEX, np.asarray(sim.flow.vertex_head(), dtype=float))
-        # a dataset, not an attribute: a long run's history outgrows HDF5's 64 KiB attribute limit
-        history = json.dumps(sim.flow.history).encode()
+        texts["flow/history"] = json.dumps(sim.flow.history).encode()
         attrs["flow_time"] = float(sim.flow.time)
-    return data, attrs, history
+    return data, attrs, texts
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -131,15 +134,16 @@ class Writer:
             self.rows[FACE] = parallel.Rows(self.faces, self.n_faces)
         self.blocks = parallel.blocks(self.mpi, NAME, self.rows)
 
-    def write(self, directory, sim, step, t):
-        """The checkpoint of ``sim`` after step ``step`` at time t, into ``directory`` (known to every rank)."""
-        data, attrs, history = local_state(sim, step, t)
+    def write(self, directory, sim, step, t, records):
+        """The checkpoint of ``sim`` after step ``step`` at time t, with the run's step records up to it, into
+        ``directory`` (known to every rank)."""
+        data, attrs, texts = local_state(sim, step, t, records)
         path = os.path.join(directory, NAME)
         if self.parallel:
-            self._write_parallel(path, data, attrs, history)
+            self._write_parallel(path, data, attrs, texts)
         else:
             arrays = self._gather(data)
-            run_on_root(self.mpi, _write_serial, path, attrs, arrays, history)
+            run_on_root(self.mpi, _write_serial, path, attrs, arrays, texts)
 
     # -- gathered to rank 0 -------------------------------------------------------------------------
     def _gather(self, data):
@@ -163,17 +167,17 @@ class Writer:
         return out if self.mpi.rank == 0 else None
 
     # -- by every rank ------------------------------------------------------------------------------
-    def _write_parallel(self, path, data, attrs, history):
+    def _write_parallel(self, path, data, attrs, texts):
         blocks = {name: (self.blocks[kind].start,
                          self.blocks[kind].gather(self.mpi, self.rows[kind].pick(values)))
                   for name, (kind, values) in data.items()}
         shapes = {name: (self.rows[kind].total,) + values.shape[1:] for name, (kind, values) in data.items()}
-        # rank 0's records (every rank has the same): their length is metadata, the same on every rank
-        n_history = self.mpi.bcast(None if history is None else len(history), root=0)
+        # rank 0's records (every rank has the same): their lengths are metadata, the same on every rank
+        lengths = self.mpi.bcast({name: len(b) for name, b in texts.items()}, root=0)
         tmp = path + TMP_SUFFIX
         with _parallel_file(self.mpi, tmp) as h5:
-            datasets = run_on_all(self.mpi, _create, h5, attrs, shapes, n_history)
-            run_on_all(self.mpi, _fill, datasets, blocks, history if self.mpi.rank == 0 else None)
+            datasets = run_on_all(self.mpi, _create, h5, attrs, shapes, lengths)
+            run_on_all(self.mpi, _fill, datasets, blocks, texts if self.mpi.rank == 0 else {})
         run_on_root(self.mpi, os.replace, tmp, path)
 
 
@@ -193,33 +197,34 @@ def _parallel_file(comm, path):
     run_on_all(comm, h5.close)
 
 
-def _create(h5, attrs, shapes, n_history):
-    """The attributes and the datasets (the same calls on every rank): {dataset path: dataset}."""
+def _create(h5, attrs, shapes, lengths):
+    """The attributes and the datasets (the same calls on every rank): {dataset path: dataset}; ``lengths``:
+    of the JSON datasets."""
     for key, value in attrs.items():
         h5.attrs[key] = value
     datasets = {name: parallel.create_dataset(h5, name, shape, np.float64) for name, shape in shapes.items()}
-    if n_history is not None:
-        datasets["flow/history"] = parallel.create_dataset(h5, "flow/history", (n_history,), np.uint8)
+    for name, n in lengths.items():
+        datasets[name] = parallel.create_dataset(h5, name, (n,), np.uint8)
     return datasets
 
 
-def _fill(datasets, blocks, history):
-    """This rank's block of every dataset; the flow records from rank 0 (``history`` there, None elsewhere)."""
+def _fill(datasets, blocks, texts):
+    """This rank's block of every dataset; the JSON datasets from rank 0 (``texts`` there, empty elsewhere)."""
     for name, (start, values) in blocks.items():
         parallel.write_block(datasets[name], start, values)
-    if history is not None:
-        parallel.write_block(datasets["flow/history"], 0, np.frombuffer(history, dtype=np.uint8))
+    for name, b in texts.items():
+        parallel.write_block(datasets[name], 0, np.frombuffer(b, dtype=np.uint8))
 
 
-def _write_serial(path, attrs, arrays, history):
+def _write_serial(path, attrs, arrays, texts):
     """Rank 0: the checkpoint from serial arrays, whole (NAME.tmp, then renamed over the old one)."""
     with open_h5(path + TMP_SUFFIX, "w") as h5:
         for key, value in attrs.items():
             h5.attrs[key] = value
         for name, data in arrays.items():
             h5.create_dataset(name, data=data)
-        if history is not None:
-            h5.create_dataset("flow/history", data=np.frombuffer(history, dtype=np.uint8))
+        for name, b in texts.items():
+            h5.create_dataset(name, data=np.frombuffer(b, dtype=np.uint8))
     os.replace(path + TMP_SUFFIX, path)
 
 
@@ -312,7 +317,8 @@ def restore(ckpt, attrs, sim):
 
 def load(comm, run_dir, sim):
     """Check the checkpoint of ``run_dir`` on rank 0, read it on every rank and restore it; returns its
-    attributes. Collective; an InputError is raised on every rank together."""
+    attributes and the run's step records up to its step. Collective; an InputError is raised on every rank
+    together."""
 
     def read_and_check():
         attrs = read_attrs(run_dir)
@@ -321,4 +327,4 @@ def load(comm, run_dir, sim):
     attrs = comm.tompi4py().bcast(run_on_root(comm, read_and_check), root=0)
     ckpt = run_on_all(comm, read_datasets, run_dir)
     restore(ckpt, attrs, sim)
-    return attrs
+    return attrs, json.loads(bytes(ckpt["steps"]).decode())

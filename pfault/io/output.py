@@ -384,15 +384,3 @@ class RunWriter:
         self.close()
         if not self.committed:
             shutil.rmtree(self.dir, ignore_errors=True)
-
-
-def read_summary_steps(run_dir, last_step):
-    """The step records of a run's summary.json up to step ``last_step`` (restart; rank 0)."""
-    from ..errors import InputError
-    path = os.path.join(run_dir, "summary.json")
-    try:
-        with open(path) as fh:
-            steps = json.load(fh)["steps"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise InputError(f"-pfault_restart {run_dir}: summary.json is not readable ({exc})") from None
-    return [r for r in steps if r.get("step", -1) <= last_step and "step" in r]

@@ -43,7 +43,7 @@ class Twice(Simulation):
             os.makedirs(theirs)
             shutil.copytree(self.run_path, mine, ignore=lambda d, names: [n for n in names if n != checkpoint.NAME])
         run_on_root(self.comm, copy)
-        gathered.write(theirs, self, step, t)
+        gathered.write(theirs, self, step, t, steps)
         self.steps_written.append(step)
 
 
