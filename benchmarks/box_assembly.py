@@ -30,10 +30,11 @@ sim.write_summary(time.perf_counter() - t0)
 fig = {"ranks": PETSc.COMM_WORLD.size, "cells": summary["mesh"]["cells"], "dofs": summary["dofs"],
        "mesh_s": sim.wall["mesh"], "setup_s": sim.wall["setup"], "assembly_s": sim.problem.assembly_wall,
        "solve_s": sim.wall["solve"], "ksp_its": sum(s["ksp_its"] for s in summary["steps"]),
-       "total_s": sim.wall["total"]}
+       "total_s": sim.wall["total"], "converged": bool(summary["converged"])}
 PETSc.Sys.Print(f"box benchmark: {fig['cells']} tets, {fig['dofs']} dofs on {fig['ranks']} ranks: "
                 f"mesh {fig['mesh_s']:.2f} s, setup {fig['setup_s']:.2f} s (stiffness assembly "
                 f"{fig['assembly_s']:.2f} s), solve {fig['solve_s']:.2f} s ({fig['ksp_its']} Krylov its), "
-                f"total {fig['total_s']:.2f} s")
+                f"total {fig['total_s']:.2f} s" + ("" if fig["converged"] else
+                                                   "  NOT CONVERGED: the solve's figures are not comparable"))
 PETSc.Sys.Print(json.dumps(fig))
 sim.destroy()
