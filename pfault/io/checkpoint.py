@@ -294,7 +294,7 @@ def restore(ckpt, attrs, sim):
         if f is not None:
             lm = f.lm_dofs
             local[lm[lm >= 0]] = ckpt[f"{name}/face"][f.face][lm >= 0]
-        p._to_global(local, PETSc.InsertMode.INSERT_VALUES, out=out)
+        p.to_global(local, PETSc.InsertMode.INSERT_VALUES, out=out)
 
     vec("u", p.u)
     vec("u_ref", p.u_ref)
@@ -302,7 +302,7 @@ def restore(ckpt, attrs, sim):
     if "u_previous/vertex" in ckpt:
         prev = p.u.duplicate()
         vec("u_previous", prev)
-        p._set_previous(attrs["previous_time"], prev)
+        p.set_previous(attrs["previous_time"], prev)
         prev.destroy()
     if "sigma0" in ckpt:
         p.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)

@@ -119,7 +119,7 @@ class Problem:
 
     def _constrained_rows(self):
         loc = self._constrained_local().astype(float)
-        g = self._to_global(loc, PETSc.InsertMode.INSERT_VALUES)
+        g = self.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
         start, _ = g.getOwnershipRange()
         rows = (np.nonzero(g.getArray() > 0.5)[0] + start).astype(PETSc.IntType)
         g.destroy()
@@ -141,14 +141,16 @@ class Problem:
                 bits = ((mask[sel, None] >> np.arange(3)) & 1) * ((b.components >> np.arange(3)) & 1)
                 vals = np.broadcast_to(np.asarray(b.displacement), dofs.shape)
                 loc[dofs[bits == 1]] = vals[bits == 1]
-            g = self._to_global(loc, PETSc.InsertMode.INSERT_VALUES)
+            g = self.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
             lift = g.duplicate()
             self.K.mult(g, lift)
             lift.scale(-1.0)
             out.append((b, g, lift))
         return out
 
-    def _to_global(self, local_array, mode=PETSc.InsertMode.ADD_VALUES, out=None):
+    def to_global(self, local_array, mode=PETSc.InsertMode.ADD_VALUES, out=None):
+        """A local array (this rank's dofs with its ghosts) into a global vector: ``out`` or a new one; with
+        ADD_VALUES the ghosts' contributions are summed (an assembled load), with INSERT_VALUES set (a state)."""
         lv = self.dm.getLocalVec()
         lv.setArray(local_array)
         g = out if out is not None else self.dm.createGlobalVec()
@@ -181,7 +183,7 @@ class Problem:
         if self.drawdown.active:
             with logged("pfaultPorePressureLoad"):
                 self.asm.pore_pressure_load(self.cell_dp(t), loc)
-        self._to_global(loc, out=self.f)
+        self.to_global(loc, out=self.f)
         for b, g, lift in self.lifts:
             self.f.axpy(b.scale(t), lift)
         arr = self.f.getArray()
@@ -271,7 +273,7 @@ class Problem:
         loc = self.local_array(self.u)
         lag = np.nonzero(f.lagrange)[0]
         loc[f.lm_dofs[lag]] = f.t0[lag]
-        self._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=self.u)
+        self.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=self.u)
         f.start_from(loc, f.t0)     # penalty faces too: their shear starts from the initial one
 
     # -- SNES callbacks --------------------------------------------------------------------------
@@ -282,7 +284,7 @@ class Problem:
         if self.faults is not None:
             out = np.zeros(self.dofmap.n_local)
             self.faults.residual(self.local_array(x), out, self._trial)
-            g = self._to_global(out)
+            g = self.to_global(out)
             F.axpy(1.0, g)
             g.destroy()
         self.log_residual.end()
@@ -392,13 +394,14 @@ class Problem:
         rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
         if rec["converged"]:
             if start is not None:
-                self._set_previous(self.t_now, start)
+                self.set_previous(self.t_now, start)
             self.t_now = float(t)
         if start is not None:
             start.destroy()
         return rec
 
-    def _set_previous(self, t, u):
+    def set_previous(self, t, u):
+        """Record the state u converged at time t before the current one (the predictor's history)."""
         if self.previous is not None:
             self.previous[1].destroy()
         self.previous = (float(t), u.copy())
@@ -485,7 +488,7 @@ class Problem:
         """The gravity load vector (zero on constrained dofs) into ``out``."""
         grav = np.zeros(self.dofmap.n_local)
         self.asm.gravity_load(self.settings.gravity, grav)
-        self._to_global(grav, out=out)
+        self.to_global(grav, out=out)
         out.getArray()[self.bc_local_owned] = 0.0
 
     def solve_interval(self, snes, t_prev, t, max_cuts=0):
@@ -604,7 +607,7 @@ def configure_fieldsplit(problem, pc):
     from ..fields import DISPLACEMENT, LAGRANGE
     loc = np.zeros(problem.dofmap.n_local)
     loc[f.lm_dofs[np.nonzero(f.lagrange)[0]].ravel()] = 1.0
-    g = problem._to_global(loc, PETSc.InsertMode.INSERT_VALUES)
+    g = problem.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
     start, _ = g.getOwnershipRange()
     mark = g.getArray() > 0.5
     g.destroy()

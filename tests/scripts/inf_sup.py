@@ -27,11 +27,11 @@ p.jacobian(sim.snes, p.u, p.J, p.J)
 J = p.J.convert("dense").getDenseArray().copy()
 loc = np.zeros(sim.dofmap.n_local)
 loc[f.lm_dofs.ravel()] = 1.0
-mark = p._to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray() > 0.5
+mark = p.to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray() > 0.5
 # the constraint rows of stuck faces are -c (A g + S dt) (forces); in jump units A g + S dt the saddle point is
 # symmetric, [K B^T; B -S]: divide each row by its -c
 loc[f.lm_dofs] = -np.column_stack([f.law.c_n, f.law.c_t, f.law.c_t])
-rowscale = p._to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray()
+rowscale = p.to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray()
 J[mark] /= rowscale[mark, None]
 bc = np.zeros(len(mark), bool)
 bc[p.bc_rows] = True

@@ -52,7 +52,7 @@ def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noi
     split = dm.vert_sides > 1
     plus = dm.vertex_dofs(1)[split]
     loc[plus] += np.asarray(offset)[None, :]
-    p._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=x)
+    p.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=x)
     va = rng.normal(size=n) * 1e-3
     va[lm] = rng.normal(size=len(lm)) * 1e5
     va[p.bc_rows - rstart] = 0.0

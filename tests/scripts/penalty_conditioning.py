@@ -73,7 +73,7 @@ def one(method, k=None):
     loc = np.zeros(dm.n_local)
     # a slight interpenetration: every face closed and stuck (Lagrange and penalty)
     loc[dm.vertex_dofs(1)[dm.vert_sides > 1]] = (-1e-9, 0.0, 0.0)
-    p._to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=x)
+    p.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=x)
     F = x.duplicate()
     p.residual(sim.snes, x, F)
     F.scale(-1.0)
