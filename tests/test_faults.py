@@ -491,3 +491,22 @@ def test_loading_unloading_reloading_closes_and_reopens_the_fault(runs, ranks):
             assert st["open"] == 0 and st["stick"] == n, st
             # closed: no opening beyond the stabilisation's O(h) perturbation of the jump (1.5e-6 m measured)
             assert st["max_fault_opening_m"] <= 1e-3 * 1e-2, st
+
+
+@pytest.mark.parametrize("method", ["lagrange", "penalty"])
+def test_a_step_at_zero_load_after_a_recovery_converges(tmp_path, method):
+    """Geostatic fissure box: 20 m of drawdown in a year, recovered in the next (the faces slipped and keep a
+    permanent offset), then a year at zero drawdown. The last step starts from the converged state: its load
+    vector is zero and its residual round-off of the internal forces. Its tolerance scales with those forces
+    and the gravity load, not with the zero load: one Newton iteration. Scaled by the load alone it ran to
+    -snes_max_it (51 iterations, not converged)."""
+    out = tmp_path / method
+    _, s = run_scene("config/hard/fissure_box.opts", out, ranks=2,
+                     extra=["-pfault_geostatic", "true", "-pfault_fault_fissure_method", method,
+                            "-pfault_material_sand_head_drawdown", "0:0,1*year:20,2*year:0,3*year:0",
+                            "-pfault_time_steps", "3", "-pfault_time_end", "3*year", "-pfault_time_max_cuts", "0"])
+    assert s["converged"]
+    steps = [st for st in s["steps"] if st["time_s"] > 0]
+    assert steps[0]["slip"] > 0 and steps[1]["max_fault_slip_m"] > 1e-3     # a permanent offset
+    assert steps[2]["newton_its"] <= 2 and steps[2].get("substeps", 1) == 1
+    assert steps[2]["max_fault_slip_m"] == pytest.approx(steps[1]["max_fault_slip_m"], rel=1e-8)
