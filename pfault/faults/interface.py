@@ -229,10 +229,8 @@ class FaultInterface:
         """Start the faces' laws at the state x_loc from the total tractions ``t`` (owned faces, local frame):
         the initial traction t0 of a geostatic state, or the tractions a checkpoint recorded. A penalty face's
         tangential traction is its history's return map, not a function of its jump; Lagrange faces read
-        theirs from their multipliers. Then ``begin_step`` at x_loc."""
-        gl = self.jumps(x_loc)[1]
-        g = np.where(self.lagrange[:, None], self.start.g, gl)
-        self.start = StepStart(g, np.array(t, dtype=float), self.start.state)
+        theirs from their multipliers. Then ``begin_step`` at x_loc (which reads the penalty faces' start only)."""
+        self.start = StepStart(self.jumps(x_loc)[1], np.array(t, dtype=float), self.start.state)
         self.begin_step(x_loc)
 
     def initial_tractions(self, sigma0):

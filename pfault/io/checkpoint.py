@@ -41,8 +41,8 @@ Contents (datasets; attributes on the root)
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``
 
-Format 4. Format 3 (without ``faults/traction`` and ``steps``), 2 (multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and
-1 are refused.
+Format 4. Format 3 (without ``faults/traction`` and ``steps``), 2 (multipliers per serial cell: ``u/cell_ids``,
+``u/cell``) and 1 are refused.
 """
 
 from __future__ import annotations
@@ -92,8 +92,9 @@ def local_state(sim, step, t, records):
     if p.previous is not None:
         vecs.append(("u_previous", p.previous[1]))
         attrs["previous_time"] = float(p.previous[0])
+    u_local = p.local_array(p.u)
     for name, vec in vecs:
-        local = p.local_array(vec)
+        local = u_local if vec is p.u else p.local_array(vec)
         data[f"{name}/vertex"] = (VERTEX, _take(local, vdofs))
         if f is not None:
             data[f"{name}/face"] = (FACE, _take(local, f.lm_dofs))
@@ -102,7 +103,7 @@ def local_state(sim, step, t, records):
     if f is not None:
         data["faults/t0"] = (FACE, np.asarray(f.t0, dtype=float))
         data["faults/pn"] = (FACE, np.asarray(f.pn, dtype=float))
-        data["faults/traction"] = (FACE, np.asarray(f.tractions(p.local_array(p.u)), dtype=float))
+        data["faults/traction"] = (FACE, np.asarray(f.tractions(u_local), dtype=float))
     # datasets, not attributes: a long run's records outgrow HDF5's 64 KiB attribute limit
     texts = {"steps": json.dumps(records).encode()}
     if sim.flow is not None:
