@@ -647,9 +647,9 @@ def targets_text(results):
     out.append(
         "A Newton iteration in which a face changed state costs one MUMPS factorisation of the saddle-point "
         "Jacobian (PORD ordering: the best of PORD, AMF, AMD and QAMD with Debian's MUMPS, which has no METIS; "
-        "BLR gives no gain); one without a state change keeps the factors, as GMRES's preconditioner when "
-        "slipping faces moved the Jacobian (README, \"Faults and fissures\"). The run time is then the number "
-        "of Newton iterations that change a state times the factorisation's cost: the slipping patch of a "
+        "BLR gives no gain); one without a state change keeps the factors, as flexible GMRES's preconditioner "
+        "when slipping faces moved the Jacobian (README, \"Faults and fissures\"). The run time is then the "
+        "number of Newton iterations that change a state times the factorisation's cost: the slipping patch of a "
         "Queretaro scene grows in every step, and each step takes 3-5 such iterations to settle it.")
     return "\n".join(out)
 
@@ -746,8 +746,8 @@ def write_readme(results, path, regenerate_cmd):
         "## Contact solver: before and after one semismooth Newton (paper-size meshes, 2 ranks, MUMPS)",
         "",
         "Before: the active-set loop around SNES (git 941a8d1). Newton counts include each step's elastic trial "
-        "when a step takes one; LU counts PETSc's MatLUFactorNum events; Krylov iterations are GMRES's on the "
-        "factors.",
+        "when a step takes one; LU counts PETSc's MatLUFactorNum events; Krylov iterations are flexible GMRES's on "
+        "the factors (one triangular solve each).",
         "",
         solver_history(results),
         "",
