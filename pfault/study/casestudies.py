@@ -780,7 +780,8 @@ def write_readme(results, path, regenerate_cmd):
     text += ["## Convergence at paper size", "", conv or "Every run listed here converged.", "", CONVERGENCE_NOTE, ""]
     text += ["## Wall times by stage", "",
              "From summary.json (`wall_s`): mesh = gmsh meshing on rank 0 + distribution, setup = fields, "
-             "assembly, solver objects and the first factorisation, solve = all time steps, output = XDMF/HDF5. "
+             "assembly, solver objects and the first factorisation (a geostatic fault scene's first one is its "
+             "gravity solve's, in solve), solve = the geostatic state and all time steps, output = XDMF/HDF5. "
              "End to end = the mpirun process as timed by the driver (adds MPI start-up and imports). CPU s / rank "
              "= user+system CPU of all processes divided by the ranks: close to what the wall time would be on an "
              "idle machine when the load is above 2.", "",
