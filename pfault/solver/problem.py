@@ -469,10 +469,8 @@ class Problem:
         round-off: its load is zero."""
         if self._atol_user:
             return
-        ku = self.u.duplicate()
-        self.K.mult(self.u, ku)
-        scale = max(self.f.norm(), ku.norm(), self._gravity_load_norm())
-        ku.destroy()
+        self.K.mult(self.u, self.F)     # F as scratch: the predictor and SNES evaluate the residual next
+        scale = max(self.f.norm(), self.F.norm(), self._gravity_load_norm())
         rtol, _, stol, max_it = snes.getTolerances()
         snes.setTolerances(rtol=rtol, atol=max(rtol * scale, 1e-300), stol=stol, max_it=max_it)
 
