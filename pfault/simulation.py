@@ -399,10 +399,9 @@ class Simulation:
         if index == len(times) - 1:
             raise InputError(f"-pfault_restart {self.restart_dir}: the run is complete at t = {t:g} s; give a "
                              "later -pfault_time_end to continue it")
-        steps = [r for r in records if "step" in r and r["step"] <= step]
         self.restart_step = step
         _print(f"pfault: continuing {self.restart_dir} after step {step} (t = {_fmt_time(t).strip()})")
-        return steps, index, step - index
+        return records, index, step - index     # the checkpoint's records end at its step
 
     def _step_done(self, steps, rec, step, t):
         """A step is complete: its checkpoint (when it converged) and the summary so far are written, and the

@@ -352,7 +352,7 @@ class Problem:
         ksp = snes.getKSP()
         ksp.setOperators(self.J, self.J)
         if self.faults is not None:
-            self._reuse_factors = is_direct() and snes.getKSP().getType() != "preonly"
+            self._reuse_factors = is_direct() and ksp.getType() != "preonly"
             self.faults.begin_step(self.local_array(self.u))
             if self.settings.geostatic:
                 # the glued gravity solve (geostatic_prestress) sets the solver up on its own operator first: a
