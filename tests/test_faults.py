@@ -252,6 +252,22 @@ def test_newton_converges_quadratically_in_the_settled_active_set(runs, ranks, c
     assert step["newton_its"] <= 8, step["newton_its"]
 
 
+def test_factors_kept_across_state_changes_give_the_same_newton_iterates(tmp_path):
+    """A direct fault solve keeps its factors while few faces differ in state from the factored Jacobian
+    (Problem._reuse_budget: flexible GMRES on the old factors). Wuxi on a coarse mesh, 2 ranks, run with the
+    factors kept only while no face changes state and with them kept across up to 10 faces' changes: the same
+    Newton iterations in every step and the same maxima to 1e-9 (the linear solves converge to -ksp_rtol
+    1e-8 either way), with fewer factorisations and more Krylov iterations (measured: 13 against 8
+    factorisations, 68 against 230 Krylov iterations)."""
+    out = run_script("factor_reuse.py", ranks=2, args=["-pfault_output_dir", str(tmp_path)])
+    fresh, kept = out["0"], out["10"]
+    assert fresh["converged"] and kept["converged"]
+    assert kept["newton"] == fresh["newton"] and sum(fresh["newton"]) >= 10, (fresh, kept)
+    for key in ("max_subsidence_m", "max_horizontal_displacement_m", "max_fault_opening_m", "max_fault_slip_m"):
+        assert fresh[key] > 0 and kept[key] == pytest.approx(fresh[key], rel=1e-9), key
+    assert kept["factorizations"] < fresh["factorizations"] and kept["krylov"] > fresh["krylov"], (fresh, kept)
+
+
 # ---------------------------------------------------------------------------------------------
 # Jacobian of the full system (Taylor test) in every state
 

@@ -80,8 +80,10 @@ class Problem:
         self._dp_interval = None
         self._jacobian_key = None       # faces' states of the assembled J while it depends on nothing else
         self._trial = None              # faces' states of a step's elastic trial while it is solved
-        self._reuse_factors = False     # a direct PC under GMRES: keep the factors while no state changes
+        self._reuse_factors = False     # a direct PC under FGMRES: keep the factors while they pay (jacobian)
         self._factor_states = None      # faces' states of the Jacobian last factored
+        self._t_factor = self._t_iteration = None   # seconds per factorisation and Krylov iteration (measured)
+        self._factoring = self._t_krylov0 = self._kept_its = None
         self.t_now = 0.0                # time of the converged state in self.u
         self.previous = None            # (time, state) converged before self.u: the predictor's history
         self.n_jacobians = 0             # interface Jacobians assembled (a configuration seen before is kept)
@@ -309,18 +311,57 @@ class Problem:
             self._jacobian_key = None if varies else state
             self.n_jacobians += 1
             if self._reuse_factors:
-                # the faces' states of the factorisation: only slipping faces' values moved, and the old
-                # factors precondition GMRES on the new Jacobian (a few iterations); a state change refactors.
-                # Calibrated Queretaro at size factor 2: 18 factorisations and 59 Krylov iterations instead
-                # of 25 and 29 for the same 29 Newton iterations
+                # the old factors precondition FGMRES on the new Jacobian while it differs from the factored
+                # one by the slipping faces' values and the states of a few faces (_reuse_budget): a few
+                # iterations instead of a factorisation. Calibrated Queretaro at paper size: 22 factorisations
+                # instead of 30 for the same 36 Newton iterations
                 fs = self._factor_states
-                keep = fs is not None and len(fs) == len(state) and np.array_equal(fs, state)
-                keep = self.comm.tompi4py().allreduce(keep, op=MPI.LAND)
+                comm = self.comm.tompi4py()
+                changed = len(state) if fs is None or len(fs) != len(state) else int(np.count_nonzero(fs != state))
+                changed = comm.allreduce(changed, op=MPI.SUM)
+                keep = fs is not None and changed <= self._reuse_budget() and not self._kept_too_long()
+                keep = comm.allreduce(keep, op=MPI.LAND)
                 snes.getKSP().getPC().setReusePreconditioner(keep)      # for the trial's own solve
                 _set_lag_preconditioner(snes, -1 if keep else -2)       # SNES sets the PC's flag after this
                 if not keep:
                     self._factor_states = np.array(state)
+                    self._factoring = time.perf_counter()
         self.log_jacobian.end()
+
+    def _reuse_budget(self):
+        """How many faces may differ in state from the factored Jacobian before a new factorisation pays. A
+        face's state changes at most its 3 multiplier rows, and FGMRES preconditioned by the old factors needs
+        about one iteration per changed row: the old factors are kept while 3 iterations per changed face,
+        doubled for the slipping faces' drift, cost less than a factorisation. Both costs are this solver's
+        own, timed in this run (``_time_linear``); 0 until both have been seen. (Calibrated Queretaro: a
+        factorisation costs 25-30 iterations; 2 changed faces took 11-13 iterations, 12 took 35.)"""
+        tf, ti = self._t_factor, self._t_iteration
+        if tf is None or ti is None:
+            return 0
+        return int(self.comm.tompi4py().allreduce(tf / ti, op=MPI.MIN) // 6)
+
+    def _kept_too_long(self):
+        """The last linear solve on kept factors took longer than a factorisation: refactor now (the
+        Jacobian has moved too far from the factored one for the budget's estimate)."""
+        tf, ti = self._t_factor, self._t_iteration
+        return tf is not None and ti is not None and (self._kept_its or 0) * ti > tf
+
+    def _time_linear(self, ksp, its, rnorm):
+        """KSP monitor of a direct fault solve: times the factorisation (from the Jacobian's assembly to the
+        first residual norm) and one Krylov iteration (each one triangular solve on the factors), and counts
+        the iterations of a solve on kept factors."""
+        now = time.perf_counter()
+        if its == 0:
+            fresh = self._factoring is not None
+            if fresh:
+                self._t_factor = now - self._factoring
+            self._factoring = None
+            self._t_krylov0 = now
+            self._kept_its = None if fresh else 0
+        elif self._t_krylov0 is not None:
+            self._t_iteration = (now - self._t_krylov0) / its
+            if self._kept_its is not None:
+                self._kept_its = its
 
     def _monitor(self, snes, its, fnorm):
         """-pfault_contact_monitor: the faces' states at each Newton iterate and how many changed."""
@@ -353,6 +394,8 @@ class Problem:
         ksp.setOperators(self.J, self.J)
         if self.faults is not None:
             self._reuse_factors = is_direct() and ksp.getType() != "preonly"
+            if self._reuse_factors:
+                ksp.setMonitor(self._time_linear)
             self.faults.begin_step(self.local_array(self.u))
             if self.settings.geostatic:
                 # the glued gravity solve (geostatic_prestress) sets the solver up on its own operator first: a

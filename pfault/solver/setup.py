@@ -103,8 +103,8 @@ def apply_solver_defaults(linear=False, penalty=False):
         if linear:
             set_default("ksp_type", "preonly")
         else:
-            # Flexible GMRES on the factorised Jacobian: one iteration after a factorisation, a few while the
-            # faces' states are those of the last one and its factors are kept (Problem.jacobian). Keeping them
+            # Flexible GMRES on the factorised Jacobian: one iteration after a factorisation, a few while its
+            # factors are kept (Problem.jacobian: while few faces' states changed since). Keeping them
             # for a fixed number of Newton iterations whatever the states (-snes_lag_preconditioner 3) was
             # slower: calibrated Queretaro 216 s against 98 s, 160-320 triangular solves per step at 0.14 s each.
             # FGMRES keeps the preconditioned directions, so it applies the factors once per iteration; GMRES
