@@ -336,15 +336,14 @@ class Problem:
         own, timed in this run (``_time_linear``); 0 until both have been seen. (Calibrated Queretaro: a
         factorisation costs 25-30 iterations; 2 changed faces took 11-13 iterations, 12 took 35.)"""
         tf, ti = self._t_factor, self._t_iteration
-        if tf is None or ti is None:
-            return 0
-        return int(self.comm.tompi4py().allreduce(tf / ti, op=MPI.MIN) // 6)
+        ratio = tf / ti if tf is not None and ti else 0.0
+        return int(self.comm.tompi4py().allreduce(ratio, op=MPI.MIN) // 6)     # every rank takes part
 
     def _kept_too_long(self):
         """The last linear solve on kept factors took longer than a factorisation: refactor now (the
         Jacobian has moved too far from the factored one for the budget's estimate)."""
         tf, ti = self._t_factor, self._t_iteration
-        return tf is not None and ti is not None and (self._kept_its or 0) * ti > tf
+        return tf is not None and ti is not None and (self._kept_its or 0) * ti > tf     # reduced by the caller
 
     def _time_linear(self, ksp, its, rnorm):
         """KSP monitor of a direct fault solve: times the factorisation (from the Jacobian's assembly to the
