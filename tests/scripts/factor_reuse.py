@@ -6,8 +6,9 @@ the old factors must reach the same Newton iterates as a fresh factorisation.
 
 Runs Wuxi on a coarse mesh (size factor 3: faces change state in the first Newton iterations of steps 1-4)
 twice in-process: with the factors kept only while no face changes state (budget 0), and kept while up to 10
-faces differ from the factored states. Prints one JSON line {budget: {newton, factorizations, krylov, ...}} with the
-maxima of the run (subsidence, horizontal displacement, opening, slip).
+faces differ from the factored states (and the last solve on them cost less than a factorisation). Prints
+one JSON line {budget: {newton, factorizations, krylov, ...}} with the maxima of the run (subsidence,
+horizontal displacement, opening, slip).
 """
 import json
 import os
