@@ -78,3 +78,13 @@ def test_command_line_overrides_scene_file(tmp_path):
     text = (tmp_path / "options.txt").read_text()
     assert "-pfault_time_steps 2" in text
     assert (tmp_path / "versions.json").exists()
+
+
+def test_krylov_method_chosen_over_a_solver_file(tmp_path):
+    """-ksp_type on the command line replaces the solver file's Krylov method, and the file's options of that
+    method (iterative.opts: -ksp_gmres_restart) do not make the run fail as unused options."""
+    _, summary = run_scene("config/oedometer.opts", tmp_path, extra=["-pfault_solver", "iterative",
+                                                                     "-ksp_type", "cg"])
+    assert summary["converged"]
+    assert summary["solver"]["ksp_type"] == "cg"
+    assert summary["solver"]["pc_type"] == "hypre"       # the displacement split's (no fault)

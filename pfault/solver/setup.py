@@ -45,7 +45,8 @@ def apply_solver_file(name, scene_file=""):
     chose (-pc_type, or -PREFIX_pc_type of a sub-solver such as -fieldsplit_displacement_pc_type) does not
     inherit the file's settings of the preconditioner it replaces: the file's options under that prefix that
     configure a preconditioner (pc_*, mg_*, the MUMPS options, a fieldsplit's sub-solvers) are dropped; its
-    Krylov options stay (a Krylov method chosen alone keeps the file's preconditioner)."""
+    Krylov options stay (a Krylov method chosen alone keeps the file's preconditioner), except those of the
+    file's own Krylov method (-ksp_gmres_restart where the user chose -ksp_type cg)."""
     if not name:
         return None
     path = find_solver_file(name, scene_file)
@@ -54,8 +55,13 @@ def apply_solver_file(name, scene_file=""):
     chosen = [key[:-len("pc_type")] for key, _ in entries if key.endswith("pc_type") and opts.hasName(key)]
     if opts.hasName("pc_type"):
         chosen.append("")
+    krylov = [key[:-len("ksp_type")] for key, _ in entries if key.endswith("ksp_type") and opts.hasName(key)]
+    if opts.hasName("ksp_type"):
+        krylov.append("")
     for key, value in entries:
         if any(key.startswith(p) and key[len(p):].startswith(_PC_KEYS) for p in chosen):
+            continue
+        if any(key.startswith(p) and key[len(p):].startswith(_KSP_METHOD_KEYS) for p in krylov):
             continue
         if not opts.hasName(key):
             opts.setValue(key, "" if value is None else value)
@@ -63,6 +69,9 @@ def apply_solver_file(name, scene_file=""):
 
 
 _PC_KEYS = ("pc_", "mat_mumps", "mg_", "fieldsplit_", "sub_")
+# options of one Krylov method (KSPSetFromOptions_<type>): meaningless under another -ksp_type
+_KSP_METHOD_KEYS = tuple(f"ksp_{m}_" for m in ("gmres", "fgmres", "lgmres", "dgmres", "pgmres", "gcr", "chebyshev",
+                                                "richardson", "bcgsl", "fcg", "pipefcg", "cg", "minres", "tfqmr"))
 
 
 def is_direct():
