@@ -7,7 +7,7 @@ Same geometry (2000 m x 2000 m x 200 m, n x n x n hexahedra split into 6 tetrahe
 materials and load as config/demo.opts (clay above 40 m depth, sand to 140 m, rock below; one year of its
 drawdown as the pore-pressure change of the clay and the sand), rollers on the sides and the bottom fixed,
 P1 vector elements, the rigid-body modes as near-null space, and the KSP/PC options of pfault's solver file
-(config/solver/NAME.opts). Prints the phases' wall times (mesh, stiffness assembly, solve) and the Krylov
+(config/solver/NAME.opts; of a fieldsplit file, the displacement split's, as pfault uses them without faults). Prints the phases' wall times (mesh, stiffness assembly, solve) and the Krylov
 iterations as one line and one JSON line, like box_assembly.py.
 """
 import argparse
@@ -125,9 +125,16 @@ def rigid_body_modes(V):
 A.setNearNullSpace(rigid_body_modes(V))
 opts = PETSc.Options()
 solver_file = os.path.join(ROOT, "config", "solver", a.solver + ".opts")
-for e in read_options_file(solver_file):
-    if not opts.hasName("dx_" + e.name):
-        opts.setValue("dx_" + e.name, "" if e.value is None else e.value)
+entries = [(e.name, e.value) for e in read_options_file(solver_file)]
+if ("pc_type", "fieldsplit") in entries:
+    # pfault solves a scene without faults with the displacement split's options (configure_fieldsplit)
+    split = "fieldsplit_displacement_"
+    entries = [(k[len(split):], v) for k, v in entries if k.startswith(split)
+               and not k.startswith((split + "ksp_", split + "mat_schur"))] + \
+              [(k, v) for k, v in entries if not k.startswith(("pc_", "fieldsplit_"))]
+for name, value in entries:
+    if not opts.hasName("dx_" + name):
+        opts.setValue("dx_" + name, "" if value is None else value)
 for i in range(0, len(extra) - 1, 2):
     if extra[i].startswith("-") and not extra[i].startswith("-dx_"):
         opts.setValue("dx_" + extra[i][1:], extra[i + 1])
