@@ -28,13 +28,17 @@ class ElasticAssembler:
         self.centroids = mesh.coords[mesh.cells].mean(axis=1)
 
     # -- operator ----------------------------------------------------------------------------
-    def add_stiffness(self, mat):
-        """Add element stiffness matrices into ``mat`` (local numbering), in batches of CHUNK cells."""
-        dofs = self.dofmap.cell_dofs.astype(PETSc.IntType)
+    def add_stiffness(self, mat, blocked=False):
+        """Add element stiffness matrices into ``mat`` (local numbering), in batches of CHUNK cells; ``blocked``:
+        as 3x3 blocks of the vertices' local block indices (a matrix whose local-to-global map has block size
+        3; a vertex's 3 dofs are consecutive and start at a multiple of 3)."""
+        dofs = self.dofmap.cell_dofs
+        idx = (dofs[:, 0::3] // 3 if blocked else dofs).astype(PETSc.IntType)
+        insert = mat.setValuesBlockedLocalRCV if blocked else mat.setValuesLocalRCV
         for s in range(0, len(dofs), CHUNK):
             e = slice(s, s + CHUNK)
             ke = el.stiffness(self.grad[e], self.vol[e], self.lam[e], self.mu[e])
-            mat.setValuesLocalRCV(dofs[e], dofs[e], ke.reshape(len(ke), 144), addv=PETSc.InsertMode.ADD_VALUES)
+            insert(idx[e], idx[e], ke.reshape(len(ke), 144), addv=PETSc.InsertMode.ADD_VALUES)
 
     # -- loads (local arrays, to be added with localToGlobal) ---------------------------------
     def scatter_cell_forces(self, fe, out):
