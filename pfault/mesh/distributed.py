@@ -7,6 +7,8 @@ back to rank 0 in the serial numbering through the same SF.
 
 from __future__ import annotations
 
+import os
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +114,10 @@ def _set_partition(dm, tets, nv):
     n_global = comm.tompi4py().allreduce(nc)
     graph = PETSc.Mat().createAIJ(((nc, n_global), (nc, n_global)), csr=(offsets, cols, np.ones(len(cols))),
                                   comm=comm)
+    # PT-Scotch 7 partitions with several threads unless told otherwise, and its threads' races make the partition
+    # differ from run to run (two-blocks scene, 2 ranks: 16/16 or 10/22 fault faces per rank), and with it the
+    # roundoff and the iterative solvers' iteration counts. One thread per rank: the same partition every run
+    os.environ.setdefault("SCOTCH_PTHREAD_NUMBER", "1")
     mp = PETSc.MatPartitioning().create(comm)
     mp.setAdjacency(graph)
     mp.setType(graph_type)

@@ -3,8 +3,9 @@
 
     mpirun -n 2 python tests/scripts/fault_partition.py -pfault_box_cells 8,4,4
 
-Prints JSON {"ranks": N, "faces_per_rank": [...], "fault_faces": total}. A face belongs to the rank that
-owns its minus cell (pfault.faults.interface.FaultInterface); the 2-rank fault tests need faces on every rank.
+Prints JSON {"ranks": N, "faces_per_rank": [...], "fault_faces": total, "cell_ranks": [...]} (cell_ranks: the
+rank of each cell, in serial order). A face belongs to the rank that owns its minus cell
+(pfault.faults.interface.FaultInterface); the 2-rank fault tests need faces on every rank.
 """
 import json
 import sys
@@ -21,7 +22,15 @@ sim = Simulation(SCENE, sys.argv)
 sim.setup()
 faults = sim.problem.faults
 counts = [int(c) for c in faults.mpi.allgather(faults.nf)]
+mesh = sim.mesh
+owned = faults.mpi.gather(mesh.cell_serial)      # (no overlap: every local cell is owned)
 out = {"ranks": PETSc.COMM_WORLD.size, "faces_per_rank": counts, "fault_faces": int(faults.nf_total)}
+if owned is not None:
+    cell_ranks = [0] * sum(len(o) for o in owned)
+    for r, ids in enumerate(owned):
+        for i in ids.tolist():
+            cell_ranks[i] = r
+    out["cell_ranks"] = cell_ranks
 sim.destroy()
 if PETSc.COMM_WORLD.rank == 0:
     print(json.dumps(out))
