@@ -121,7 +121,18 @@ def _set_partition(dm, tets, nv):
     mp = PETSc.MatPartitioning().create(comm)
     mp.setAdjacency(graph)
     mp.setType(graph_type)
+    # PT-Scotch's "quality" strategy: a smaller cut for no measurable time (1M-tet box: mesh phase 1.85-1.91 s
+    # against 1.83-1.95 s), and MUMPS factors the resulting numbering faster (paper-size calibrated Queretaro,
+    # first 5 years: 2.9 s per factorisation against 3.6 s with the default strategy, 3.5 s "speed", 3.1 s
+    # "balance")
+    opts = PETSc.Options()
+    default = "mat_partitioning_ptscotch_strategy"
+    ours = not opts.hasName(default)
+    if ours:
+        opts.setValue(default, "quality")
     mp.setFromOptions()
+    if ours:
+        opts.delValue(default)
     target = PETSc.IS()
     mp.apply(target)
     rank_of = target.getIndices()
