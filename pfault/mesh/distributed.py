@@ -8,7 +8,6 @@ back to rank 0 in the serial numbering through the same SF.
 from __future__ import annotations
 
 import os
-
 from dataclasses import dataclass
 
 import numpy as np
@@ -126,13 +125,13 @@ def _set_partition(dm, tets, nv):
     # first 5 years: 2.9 s per factorisation against 3.6 s with the default strategy, 3.5 s "speed", 3.1 s
     # "balance")
     opts = PETSc.Options()
-    default = "mat_partitioning_ptscotch_strategy"
-    ours = not opts.hasName(default)
+    strategy = "mat_partitioning_ptscotch_strategy"
+    ours = not opts.hasName(strategy)
     if ours:
-        opts.setValue(default, "quality")
+        opts.setValue(strategy, "quality")
     mp.setFromOptions()
     if ours:
-        opts.delValue(default)
+        opts.delValue(strategy)     # (unread when -mat_partitioning_type picks another partitioner)
     target = PETSc.IS()
     mp.apply(target)
     rank_of = target.getIndices()

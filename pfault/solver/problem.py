@@ -700,8 +700,8 @@ def _extend_pattern(K0, rows, cols, bs=1):
         raise RuntimeError("stabilisation rows must be owned")
     ncols = K0.getSize()[1]
     # K0's rows are sorted and without repeats (an assembled AIJ matrix), so its keys row * ncols + col are
-    # sorted: the new entries are placed by binary search (paper-size Queretaro: 15 million entries, where
-    # sorting them all again took seconds)
+    # sorted: the new entries are placed by binary search instead of sorting all entries again (paper-size
+    # calibrated Queretaro, with the BAIJ insertion: the operator's build 1.0-1.1 s instead of 1.6-2.3 s)
     key = np.repeat(np.arange(nrows, dtype=np.int64), np.diff(indptr)) * ncols + indices
     extra = np.unique(rows * ncols + np.asarray(cols, np.int64))
     pos = np.searchsorted(key, extra)
