@@ -116,7 +116,7 @@ class Problem:
             self.faults.insert_pattern(Kb)
         Kb.assemble()
         lgmap = Kb.getLGMap()
-        K = Kb.convert(PETSc.Mat.Type.AIJ)      # in place
+        K = Kb.convert(PETSc.Mat.Type.AIJ)      # in place; the conversion drops the local-to-global map
         K.setLGMap(*lgmap)
         K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         if self.faults is None:

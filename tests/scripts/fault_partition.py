@@ -10,6 +10,7 @@ rank of each cell, in serial order). A face belongs to the rank that owns its mi
 import json
 import sys
 
+import numpy as np
 import petsc4py
 
 SCENE = "config/two_blocks.opts"
@@ -26,11 +27,10 @@ mesh = sim.mesh
 owned = faults.mpi.gather(mesh.cell_serial)      # (no overlap: every local cell is owned)
 out = {"ranks": PETSc.COMM_WORLD.size, "faces_per_rank": counts, "fault_faces": int(faults.nf_total)}
 if owned is not None:
-    cell_ranks = [0] * sum(len(o) for o in owned)
+    cell_ranks = np.zeros(sum(len(ids) for ids in owned), int)
     for r, ids in enumerate(owned):
-        for i in ids.tolist():
-            cell_ranks[i] = r
-    out["cell_ranks"] = cell_ranks
+        cell_ranks[ids] = r
+    out["cell_ranks"] = cell_ranks.tolist()
 sim.destroy()
 if PETSc.COMM_WORLD.rank == 0:
     print(json.dumps(out))
