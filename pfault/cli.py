@@ -5,7 +5,8 @@ Exit codes (the same on every rank; mpirun returns them):
     0  done
     1  bad input: an option, the scene file or a mesh file (one line on stderr naming it and the fix)
     2  usage: no scene file, a scene file that does not exist, stray arguments
-    3  a step did not converge (summary.json says which), or the groundwater-flow solve failed
+    3  a step did not converge (summary.json says which), the groundwater-flow solve or the geostatic
+       gravity solve failed
     4  the output cannot be written: -pfault_output_dir not writable, a file in the way, the disk full
        (checked before the first solve against an estimate of the output size, and on every write)
     5  out of memory (a box too large for this machine is found before it is built)

@@ -37,7 +37,7 @@ EXIT_CODES = (
     (EXIT_OK, "done"),
     (EXIT_INPUT, "bad input: an option, the scene file or a mesh file"),
     (EXIT_USAGE, "usage: no scene file, a missing one, stray arguments"),
-    (EXIT_NOT_CONVERGED, "a step did not converge, or the groundwater-flow solve failed"),
+    (EXIT_NOT_CONVERGED, "a step did not converge, the groundwater-flow solve or the geostatic gravity solve failed"),
     (EXIT_OUTPUT, "the output cannot be written (not writable, a file in the way, the disk full)"),
     (EXIT_MEMORY, "out of memory"),
     (EXIT_INTERNAL, "internal error (a bug; its traceback comes before the line)"),
@@ -87,7 +87,8 @@ class OutOfMemory(PfaultError):
 
 
 class StepNotConverged(PfaultError):
-    """A solve failed in a way that ends the run (the groundwater-flow KSP): exit code 3."""
+    """A solve failed in a way that ends the run (the groundwater-flow KSP, the geostatic gravity solve): exit
+    code 3."""
     exit_code = EXIT_NOT_CONVERGED
 
 

@@ -204,6 +204,14 @@ CASES = [
     # a solve that fails: exit 3
     Case("flow_not_converged", scene_file(FLOW_SCENE, "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
          "groundwater flow: KSP flow_ did not converge at t = 43200 s (reason -3)", "kept"),
+    # the geostatic gravity solve fails: no initial stress from a wrong state (it opened the faults of the fault
+    # scene at step 0 and its run went on)
+    Case("gravity_solve_not_converged", scene("-pfault_geostatic", "true", "-pc_type", "jacobi", "-ksp_max_it", "1"),
+         3, "-pfault_geostatic: the elastic gravity solve of the initial stress failed (KSP reason -3)", "kept"),
+    Case("gravity_solve_not_converged_with_faults", lambda tmp, out, ranks: [
+        "-m", "pfault", "config/two_blocks.opts", "-pfault_output_dir", str(out), "-pfault_geostatic", "true",
+        "-pc_type", "jacobi", "-ksp_max_it", "1"], 3,
+        "-pfault_geostatic: the elastic gravity solve of the initial stress failed (KSP reason -3)", "kept"),
     # faults on one rank only (rank 1 of 2): the job ends with the line and the code
     Case("bug_on_one_rank", inject("bug", 1, 3), 6, "RuntimeError: injected fault in step 3 (a bug", "partial"),
     Case("bug_on_one_rank_before_its_first_step_is_written", inject("bug_at_step_end", 1, 1), 6,

@@ -14,6 +14,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..effects import event_total, logged
+from ..errors import StepNotConverged
 from ..faults import contact as ct
 from .setup import apply_solver_defaults, is_direct, rigid_body_modes
 
@@ -279,6 +280,14 @@ class Problem:
                 self._jacobian_key = np.full(self.faults.nf, ct.STICK)
         ksp.setOperators(A, A)
         ksp.solve(self.f, ug)
+        reason = ksp.getConvergedReason()
+        norm = ug.norm()
+        if reason <= 0 or not np.isfinite(norm):
+            # the initial stress would come from a wrong state: faults open at step 0, every step loaded by it
+            why = f"KSP reason {reason}" if reason <= 0 else "a non-finite solution"
+            raise StepNotConverged(f"-pfault_geostatic: the elastic gravity solve of the initial stress failed "
+                                   f"({why}); check the solver options (-pfault_solver, -ksp_*, -pc_*) or start "
+                                   f"without it (-pfault_geostatic false)")
 
     def _start_faults(self, sigma0):
         """The faults carry the initial stress: their tractions start from it and only the change loads."""
