@@ -430,7 +430,9 @@ class Simulation:
         _print(f"step {step:4d} t = {_fmt_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
                f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
                + f"  wall {rec['wall_s']:7.2f} s{extra}"
-               + ("" if rec["converged"] else f"  NOT CONVERGED (reason {rec['reason']})"))
+               + ("" if rec["converged"] else f"  NOT CONVERGED (reason {rec['reason']}" + (
+                   f"; singular Jacobian: {rec['null_pivots']} null pivots, part of the body held by nothing but "
+                   "open or unstabilised fault faces)" if rec.get("null_pivots") else ")")))
 
     def _summary(self, steps, converged, stop, running=False):
         last = [r for r in steps if "max_subsidence_m" in r]

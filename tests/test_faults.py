@@ -437,6 +437,23 @@ def test_tractions_oscillate_without_stabilisation(tmp_path):
     assert spread > 1e-3 or not all_stick, results
 
 
+def test_singular_jacobian_fails_fast_and_says_so(tmp_path, ranks=2):
+    """A geostatic start for the two blocks, whose right block hangs from its sides (nothing holds it up):
+    the K0 initial stress pulls every fault face open at step 0, and with every face open the right block is
+    held in x by nothing, so each Jacobian of step 1 is singular. Each linear solve on such factors stops after
+    SINGULAR_MAX_IT Krylov iterations (it ran to -ksp_max_it, 10000, in every one of the 8 sub-step attempts),
+    and the step's line names the cause. (On one rank MUMPS's factorisation flags no null pivot here, INFOG(28) =
+    0, and FGMRES stops on its divergence test, about 285 iterations per attempt.)"""
+    from pfault.solver.problem import SINGULAR_MAX_IT
+    proc, s = run_scene("config/two_blocks.opts", tmp_path / "out", ranks=ranks,
+                        extra=["-pfault_geostatic", "true"], check=False)
+    assert proc.returncode == 3 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    step = s["steps"][-1]
+    assert not step["converged"] and step["null_pivots"] > 0, step
+    assert step["ksp_its"] <= SINGULAR_MAX_IT * step["newton_its"] * 2, step
+    assert "singular Jacobian: " in proc.stdout and "null pivots" in proc.stdout
+
+
 ITERATIVE = ("-pfault_solver", "iterative", "-ksp_rtol", "1e-12")
 
 

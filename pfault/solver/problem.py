@@ -86,6 +86,9 @@ class Problem:
         self._factor_states = None      # faces' states of the Jacobian last factored
         self._t_factor = self._t_iteration = None   # seconds per factorisation and Krylov iteration (measured)
         self._factoring = self._t_krylov0 = self._kept_its = None
+        self._max_it = None             # -ksp_max_it of a direct fault solve (_time_linear caps it on singular factors)
+        self._null_pivots = 0           # null pivots MUMPS fixed in the factors in use: a singular Jacobian
+        self._step_null_pivots = 0      # the most seen in the step being solved
         self.t_now = 0.0                # time of the converged state in self.u
         self.previous = None            # (time, state) converged before self.u: the predictor's history
         self.n_jacobians = 0             # interface Jacobians assembled (a configuration seen before is kept)
@@ -341,7 +344,8 @@ class Problem:
                 comm = self.comm.tompi4py()
                 changed = len(state) if fs is None or len(fs) != len(state) else int(np.count_nonzero(fs != state))
                 changed = comm.allreduce(changed, op=MPI.SUM)
-                keep = fs is not None and changed <= self._reuse_budget() and not self._kept_too_long()
+                keep = (fs is not None and changed <= self._reuse_budget() and not self._kept_too_long()
+                        and not self._null_pivots)
                 keep = comm.allreduce(keep, op=MPI.LAND)
                 snes.getKSP().getPC().setReusePreconditioner(keep)      # for the trial's own solve
                 _set_lag_preconditioner(snes, -1 if keep else -2)       # SNES sets the PC's flag after this
@@ -376,7 +380,18 @@ class Problem:
             fresh = self._factoring is not None
             if fresh:
                 self._t_factor = now - self._factoring
+                self._null_pivots = _null_pivots(ksp.getPC())
             self._factoring = None
+            # Factors of a singular Jacobian (MUMPS fixes its null pivots: -mat_mumps_icntl_24 1) solve a
+            # consistent system in one iteration (the unstabilised two-blocks test: 1 in each Newton iteration)
+            # and an inconsistent one never: part of the body held by nothing but open faces ran FGMRES to
+            # -ksp_max_it (10000 iterations) in every attempt of the step. Such factors are not kept
+            # (jacobian) and their solves stop after SINGULAR_MAX_IT iterations; SNES then reports the failed
+            # linear solve
+            cap = self._max_it if not self._null_pivots else min(self._max_it, SINGULAR_MAX_IT)
+            if ksp.getTolerances()[3] != cap:
+                ksp.setTolerances(max_it=cap)
+            self._step_null_pivots = max(self._step_null_pivots, self._null_pivots)
             self._t_krylov0 = now
             self._kept_its = None if fresh else 0
         elif self._t_krylov0 is not None:
@@ -416,6 +431,7 @@ class Problem:
         if self.faults is not None:
             self._reuse_factors = is_direct() and ksp.getType() != "preonly"
             if self._reuse_factors:
+                self._max_it = ksp.getTolerances()[3]
                 ksp.setMonitor(self._time_linear)
             self.faults.begin_step(self.local_array(self.u))
             if self.settings.geostatic:
@@ -431,6 +447,7 @@ class Problem:
         faults SNES runs the semismooth Newton from the step's predictor (``_predict``)."""
         t0 = time.perf_counter()
         nfact, njac = (factorizations() if self.faults is not None else 0), self.n_jacobians
+        self._step_null_pivots = self._null_pivots
         trial = None
         start = None
         if self.faults is not None:
@@ -458,6 +475,8 @@ class Problem:
             rec["factorizations"] = int(factorizations() - nfact)
             rec["jacobians"] = int(self.n_jacobians - njac)
             rec["residual_history"] = history
+            if self._step_null_pivots:
+                rec["null_pivots"] = int(self._step_null_pivots)
             rec.update(self.faults.counts_by_state(self.local_array(self.u)))
         rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
         if rec["converged"]:
@@ -595,6 +614,9 @@ class Problem:
         rec["time_s"] = float(t)
         rec["substeps"] = 2 ** cuts
         rec["residual_history"] = [h for r in tried for h in r["residual_history"]]
+        pivots = max(r.get("null_pivots", 0) for r in tried)
+        if pivots:
+            rec["null_pivots"] = pivots
         return rec
 
     # -- post-processing -------------------------------------------------------------------------
@@ -617,6 +639,16 @@ class Problem:
         for name in ("is_u", "is_lm", "u_nullspace"):
             if hasattr(self, name):
                 getattr(self, name).destroy()
+
+
+SINGULAR_MAX_IT = 10     # Krylov iterations of a solve on factors with null pivots (Problem._time_linear)
+
+
+def _null_pivots(pc):
+    """Null pivots MUMPS found and fixed in the factors of ``pc`` (INFOG(28); 0 for another factorisation)."""
+    if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
+        return 0
+    return int(pc.getFactorMatrix().getMumpsInfog(28))
 
 
 def _set_lag_preconditioner(snes, lag):
