@@ -7,8 +7,9 @@ Same geometry (2000 m x 2000 m x 200 m, n x n x n hexahedra split into 6 tetrahe
 materials and load as config/demo.opts (clay above 40 m depth, sand to 140 m, rock below; one year of its
 drawdown as the pore-pressure change of the clay and the sand), rollers on the sides and the bottom fixed,
 P1 vector elements, the rigid-body modes as near-null space, and the KSP/PC options of pfault's solver file
-(config/solver/NAME.opts; of a fieldsplit file, the displacement split's, as pfault uses them without faults). Prints the phases' wall times (mesh, stiffness assembly, solve) and the Krylov
-iterations as one line and one JSON line, like box_assembly.py.
+(config/solver/NAME.opts; of a fieldsplit file, the displacement split's, as pfault uses them without
+faults). Prints the phases' wall times (mesh, stiffness assembly, solve) and the Krylov iterations as one
+line and one JSON line, like box_assembly.py.
 """
 import argparse
 import json
