@@ -425,6 +425,7 @@ class Problem:
             if self.contact.monitor:
                 snes.setMonitor(self._monitor)
             self._atol_user = PETSc.Options().hasName("snes_atol")
+            self._ksp_atol_user = PETSc.Options().hasName("ksp_atol")
         snes.setUp()
         ksp = snes.getKSP()
         ksp.setOperators(self.J, self.J)
@@ -475,6 +476,7 @@ class Problem:
             rec["factorizations"] = int(factorizations() - nfact)
             rec["jacobians"] = int(self.n_jacobians - njac)
             rec["residual_history"] = history
+            rec["atol"] = float(snes.getTolerances()[1])
             if self._step_null_pivots:
                 rec["null_pivots"] = int(self._step_null_pivots)
             rec.update(self.faults.counts_by_state(self.local_array(self.u)))
@@ -549,13 +551,22 @@ class Problem:
         |K u| and, in a geostatic scene, the gravity load the initial stress carries. A step that changes
         little starts from a residual near round-off of the previous one; one that changes nothing at zero
         load (a plateau of the drawdown at zero, the heads recovered) has only those forces to scale its
-        round-off: its load is zero."""
-        if self._atol_user:
+        round-off: its load is zero.
+
+        The Krylov solves of the step stop once their true residual is below a tenth of that tolerance (unless
+        -ksp_atol is given; only for a KSP that measures the true residual, as FGMRES does): below it the
+        linear residual no longer decides whether the next iterate converges, and -ksp_rtol 1e-8 of a residual
+        that is already small asks for digits the step does not need. Calibrated Queretaro: 85 instead of 138
+        Krylov iterations on kept factors, the same 36 Newton iterations and 22 factorisations, the same maxima."""
+        if not self._atol_user:
+            self.K.mult(self.u, self.F)     # F as scratch: the predictor and SNES evaluate the residual next
+            scale = max(self.f.norm(), self.F.norm(), self._gravity_load_norm())
+            rtol, _, stol, max_it = snes.getTolerances()
+            snes.setTolerances(rtol=rtol, atol=max(rtol * scale, 1e-300), stol=stol, max_it=max_it)
+        ksp = snes.getKSP()
+        if self._ksp_atol_user or ksp.getNormType() != PETSc.KSP.NormType.UNPRECONDITIONED:
             return
-        self.K.mult(self.u, self.F)     # F as scratch: the predictor and SNES evaluate the residual next
-        scale = max(self.f.norm(), self.F.norm(), self._gravity_load_norm())
-        rtol, _, stol, max_it = snes.getTolerances()
-        snes.setTolerances(rtol=rtol, atol=max(rtol * scale, 1e-300), stol=stol, max_it=max_it)
+        ksp.setTolerances(atol=KSP_ATOL_FRACTION * snes.getTolerances()[1])
 
     def _gravity_load_norm(self):
         """|gravity load| of a geostatic scene (0 otherwise), as geostatic_prestress assembles it; a restarted
@@ -641,6 +652,7 @@ class Problem:
                 getattr(self, name).destroy()
 
 
+KSP_ATOL_FRACTION = 0.1     # Krylov tolerance of a fault step, relative to its nonlinear one (_load_tolerance)
 SINGULAR_MAX_IT = 10     # Krylov iterations of a solve on factors with null pivots (Problem._time_linear)
 
 
