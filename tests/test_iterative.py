@@ -43,7 +43,6 @@ def test_iterative_solver_reaches_the_direct_solution(tmp_path, name):
     assert np.abs(du).max() <= 1e-8 * np.abs(ud[2]["displacement"]).max()
 
 
-
 def test_krylov_solves_stop_at_a_tenth_of_the_step_tolerance(tmp_path):
     """A fault step's Krylov solves stop once their true residual is below a tenth of the step's nonlinear
     tolerance (Problem._load_tolerance), not at -ksp_rtol of a residual already below it: the coarse calibrated
