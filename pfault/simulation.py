@@ -427,12 +427,15 @@ class Simulation:
             extra += f"  opening {rec['max_fault_opening_m']:.3g} m  slip {rec['max_fault_slip_m']:.3g} m"
         if rec.get("substeps", 1) > 1:
             extra += f"  ({rec['substeps']} sub-steps)"
+        if not rec["converged"]:
+            why = f"reason {rec['reason']}"
+            if rec.get("null_pivots"):
+                why += (f"; singular Jacobian: {rec['null_pivots']} null pivots, part of the body held by nothing "
+                        "but open or unstabilised fault faces")
+            extra += f"  NOT CONVERGED ({why})"
         _print(f"step {step:4d} t = {_fmt_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
                f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
-               + f"  wall {rec['wall_s']:7.2f} s{extra}"
-               + ("" if rec["converged"] else f"  NOT CONVERGED (reason {rec['reason']}" + (
-                   f"; singular Jacobian: {rec['null_pivots']} null pivots, part of the body held by nothing but "
-                   "open or unstabilised fault faces)" if rec.get("null_pivots") else ")")))
+               + f"  wall {rec['wall_s']:7.2f} s{extra}")
 
     def _summary(self, steps, converged, stop, running=False):
         last = [r for r in steps if "max_subsidence_m" in r]

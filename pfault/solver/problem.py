@@ -380,7 +380,7 @@ class Problem:
             fresh = self._factoring is not None
             if fresh:
                 self._t_factor = now - self._factoring
-                self._null_pivots = _null_pivots(ksp.getPC())
+                self._null_pivots = _mumps_null_pivots(ksp.getPC())
             self._factoring = None
             # Factors of a singular Jacobian (MUMPS fixes its null pivots: -mat_mumps_icntl_24 1) solve a
             # consistent system in one iteration (the unstabilised two-blocks test: 1 in each Newton iteration)
@@ -656,7 +656,7 @@ KSP_ATOL_FRACTION = 0.1     # Krylov tolerance of a fault step, relative to its 
 SINGULAR_MAX_IT = 10     # Krylov iterations of a solve on factors with null pivots (Problem._time_linear)
 
 
-def _null_pivots(pc):
+def _mumps_null_pivots(pc):
     """Null pivots MUMPS found and fixed in the factors of ``pc`` (INFOG(28); 0 for another factorisation)."""
     if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
         return 0
