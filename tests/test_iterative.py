@@ -19,28 +19,42 @@ SCENES = {
 }
 
 
+def _runs(tmp_path, scene, variants):
+    """Each (name, options) variant of the scene on 2 ranks, converged: name -> (summary, fault fields of the
+    last step, last step)."""
+    out = {}
+    for name, opts in variants:
+        _, s = run_scene(scene, tmp_path / name, ranks=2, extra=list(opts))
+        assert s["converged"], name
+        out[name] = (s, read_fault(tmp_path / name), read_last_step(tmp_path / name))
+    return out
+
+
+def _assert_close(ref, run, keys, rtol, u_rtol):
+    """The fault fields ``keys`` and the last step's displacement of ``run`` within rtol and u_rtol of the
+    largest magnitudes of ``ref``'s."""
+    (_, f_ref, u_ref), (_, f_run, u_run) = ref, run
+    for key in keys:
+        scale = np.abs(f_ref[key]).max()
+        assert scale > 0 and np.abs(f_run[key] - f_ref[key]).max() <= rtol * scale, key
+    du = u_run[2]["displacement"] - u_ref[2]["displacement"]
+    assert np.abs(du).max() <= u_rtol * np.abs(u_ref[2]["displacement"]).max()
+
+
 @pytest.mark.parametrize("name", list(SCENES))
 def test_iterative_solver_reaches_the_direct_solution(tmp_path, name):
     scene, extra = SCENES[name]
-    out = {}
     # both run their Krylov solves to -ksp_rtol (-ksp_atol 0), not to a tenth of the step's nonlinear tolerance
     # (their default): the comparison is of the Newton iterates, beyond the nonlinear tolerance
-    for solver, opts in (("mumps", ()), ("iterative", ("-ksp_rtol", "1e-12"))):
-        _, s = run_scene(scene, tmp_path / solver, ranks=2,
-                         extra=[*extra, "-pfault_solver", solver, "-ksp_atol", "0", *opts])
-        assert s["converged"], solver
-        out[solver] = (s, read_fault(tmp_path / solver), read_last_step(tmp_path / solver))
-    (sd, fd, ud), (si, fi, ui) = out["mumps"], out["iterative"]
+    out = _runs(tmp_path, scene, [(solver, [*extra, "-pfault_solver", solver, "-ksp_atol", "0", *opts])
+                                  for solver, opts in (("mumps", ()), ("iterative", ("-ksp_rtol", "1e-12")))])
+    (sd, fd, _), (si, fi, _) = out["mumps"], out["iterative"]
     assert [r["newton_its"] for r in si["steps"]] == [r["newton_its"] for r in sd["steps"]]
     assert si["solver"]["pc_type"] == "fieldsplit"
     assert 1 < si["solver"]["ksp_per_newton"] <= 40, si["solver"]
     assert np.array_equal(fi["state"], fd["state"])
     assert np.any(fd["state"] != 0), "the scene must leave the stick state somewhere"
-    for key in ("slip_magnitude", "opening", "traction_normal"):
-        scale = np.abs(fd[key]).max()
-        assert scale > 0 and np.abs(fi[key] - fd[key]).max() <= 1e-8 * scale, key
-    du = ui[2]["displacement"] - ud[2]["displacement"]
-    assert np.abs(du).max() <= 1e-8 * np.abs(ud[2]["displacement"]).max()
+    _assert_close(out["mumps"], out["iterative"], ("slip_magnitude", "opening", "traction_normal"), 1e-8, 1e-8)
 
 
 def test_krylov_solves_stop_at_a_tenth_of_the_step_tolerance(tmp_path):
@@ -52,19 +66,13 @@ def test_krylov_solves_stop_at_a_tenth_of_the_step_tolerance(tmp_path):
     magnitude: displacement 5e-7, slip 1.5e-7, normal traction 2e-7, shear traction 1.5e-5 and opening 4e-5
     (the opening is 0.9 mm at most: 4e-8 m)."""
     scene, extra = SCENES["queretaro_flow"]
-    out = {}
-    for name, opts in (("floor", ()), ("rtol", ("-ksp_atol", "0"))):
-        _, s = run_scene(scene, tmp_path / name, ranks=2, extra=[*extra, "-pfault_solver", "iterative", *opts])
-        assert s["converged"], name
-        out[name] = (s, read_fault(tmp_path / name), read_last_step(tmp_path / name))
-    (sf, ff, uf), (sr, fr, ur) = out["floor"], out["rtol"]
+    iterative = [*extra, "-pfault_solver", "iterative"]
+    out = _runs(tmp_path, scene, [("floor", iterative), ("rtol", [*iterative, "-ksp_atol", "0"])])
+    sf, sr = out["floor"][0], out["rtol"][0]
     assert [r["newton_its"] for r in sf["steps"]] == [r["newton_its"] for r in sr["steps"]]
     for r in sf["steps"][1:]:
         assert 0 < r["residual_history"][-1] <= r["atol"], r
     kf, kr = sf["solver"]["ksp_its"], sr["solver"]["ksp_its"]
     assert kf <= 0.8 * kr, (kf, kr)
-    for key in ("slip_magnitude", "opening", "traction_normal", "traction_shear"):
-        scale = np.abs(fr[key]).max()
-        assert scale > 0 and np.abs(ff[key] - fr[key]).max() <= 1e-4 * scale, key
-    du = uf[2]["displacement"] - ur[2]["displacement"]
-    assert np.abs(du).max() <= 1e-5 * np.abs(ur[2]["displacement"]).max()
+    _assert_close(out["rtol"], out["floor"], ("slip_magnitude", "opening", "traction_normal", "traction_shear"),
+                  1e-4, 1e-5)
