@@ -28,7 +28,7 @@ sim.setup()
 summary = sim.run()
 sim.write_summary(time.perf_counter() - t0)
 fig = {"ranks": PETSc.COMM_WORLD.size, "cells": summary["mesh"]["cells"], "dofs": summary["dofs"],
-       "mesh_s": sim.wall["mesh"], "setup_s": sim.wall["setup"], "assembly_s": sim.problem.assembly_wall,
+       "mesh_s": sim.wall["mesh"], "setup_s": sim.wall["setup"], "assembly_s": sim.model.equations.assembly_wall,
        "solve_s": sim.wall["solve"], "ksp_its": sum(s["ksp_its"] for s in summary["steps"]),
        "total_s": sim.wall["total"], "converged": bool(summary["converged"])}
 PETSc.Sys.Print(f"box benchmark: {fig['cells']} tets, {fig['dofs']} dofs on {fig['ranks']} ranks: "

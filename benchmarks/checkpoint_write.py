@@ -41,15 +41,15 @@ sim = Simulation(scene, sys.argv)
 sim.setup()
 summary = sim.run()
 step, t = summary["steps"][-1]["step"], summary["steps"][-1]["time_s"]
-directory = os.path.join(os.path.dirname(sim.run_path), "checkpoints")
+directory = os.path.join(os.path.dirname(sim.output.run_path), "checkpoints")
 if mpi.rank == 0:
     os.makedirs(directory, exist_ok=True)
 mpi.Barrier()
-faults = sim.problem.faults
+faults = sim.model.faults
 ways = {"gathered": False}
 if parallel.available(comm):
     ways["parallel"] = True
-writers = {name: checkpoint.Writer(comm, sim.mesh, faces=None if faults is None else faults.face,
+writers = {name: checkpoint.Writer(comm, sim.model.mesh, faces=None if faults is None else faults.face,
                                    n_faces=0 if faults is None else faults.nf_total, parallel_io=p)
            for name, p in ways.items()}
 times = {name: [] for name in ways}
@@ -57,7 +57,7 @@ for _ in range(repeat):
     for name, writer in writers.items():
         mpi.Barrier()
         t0 = time.perf_counter()
-        writer.write(directory, sim, step, t, summary["steps"])
+        writer.write(directory, sim.model, sim.state, step, t, summary["steps"])
         mpi.Barrier()
         times[name].append(time.perf_counter() - t0)
 size = os.path.getsize(os.path.join(directory, checkpoint.NAME)) if mpi.rank == 0 else 0

@@ -7,7 +7,6 @@ whose name holds a mesh name (``<material>``, ``<surface>``, ``<fault>``) are de
 
 from __future__ import annotations
 
-import ctypes
 import difflib
 from dataclasses import dataclass, field
 
@@ -285,30 +284,10 @@ _PETSC_LATE_OPTIONS = {"log_view", "options_left", "help", "options_file", "log_
                        "check_pointer_intensity", "error_output_stdout", "options_view"}
 
 
-def petsc_library():
-    """The already loaded libpetsc shared object (Debian's or a pip build)."""
-    with open("/proc/self/maps") as fh:
-        for line in fh:
-            path = line.split()[-1]
-            if "libpetsc" in path and ".so" in path:
-                return ctypes.CDLL(path)
-    return None
-
-
 def unused_petsc_options(PETSc):
     """Names of options in the PETSc database that no object has read (as -options_left reports)."""
-    lib = petsc_library()
-    if lib is None:
-        return []
-    int_t = ctypes.c_int64 if PETSc.IntType().itemsize == 8 else ctypes.c_int32
-    n = int_t(0)
-    names = ctypes.POINTER(ctypes.c_char_p)()
-    values = ctypes.POINTER(ctypes.c_char_p)()
-    if lib.PetscOptionsLeftGet(None, ctypes.byref(n), ctypes.byref(names), ctypes.byref(values)) != 0:
-        return []
-    left = [names[i].decode() for i in range(n.value)]
-    lib.PetscOptionsLeftRestore(None, ctypes.byref(n), ctypes.byref(names), ctypes.byref(values))
-    return sorted(x for x in left if x not in _PETSC_LATE_OPTIONS and not x.startswith("pfault_"))
+    from .petsc_compat import options_left
+    return sorted(x for x in options_left(PETSc) if x not in _PETSC_LATE_OPTIONS and not x.startswith("pfault_"))
 
 
 def check_unused_petsc_options(PETSc, reader):

@@ -263,7 +263,7 @@ def test_newton_converges_quadratically_in_the_settled_active_set(runs, ranks, c
 
 def test_factors_kept_across_state_changes_give_the_same_newton_iterates(tmp_path):
     """A direct fault solve keeps its factors while few faces differ in state from the factored Jacobian
-    (Problem._reuse_budget: flexible GMRES on the old factors). Wuxi on a coarse mesh, 2 ranks, run with the
+    (FactorReuse.budget: flexible GMRES on the old factors). Wuxi on a coarse mesh, 2 ranks, run with the
     factors kept only while no face changes state and with them kept across up to 10 faces' changes: the same
     Newton iterations in every step and the same maxima to 1e-9 (the linear solves stop at the same tolerances
     either way: -ksp_rtol 1e-8, or a tenth of the step's nonlinear tolerance), with fewer factorisations and more
@@ -445,7 +445,7 @@ def test_singular_jacobian_fails_fast_and_says_so(tmp_path, ranks=2):
     SINGULAR_MAX_IT Krylov iterations (it ran to -ksp_max_it, 10000, in every one of the 8 sub-step attempts),
     and the step's line names the cause. (On one rank MUMPS's factorisation flags no null pivot here, INFOG(28) =
     0, and FGMRES stops on its divergence test, about 285 iterations per attempt.)"""
-    from pfault.solver.problem import SINGULAR_MAX_IT
+    from pfault.solver.policy import SINGULAR_MAX_IT
     proc, s = run_scene("config/two_blocks.opts", tmp_path / "out", ranks=ranks,
                         extra=["-pfault_geostatic", "true"], check=False)
     assert proc.returncode == 3 and "Traceback" not in proc.stderr, proc.stderr[-2000:]

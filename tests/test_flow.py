@@ -157,7 +157,7 @@ INTERFACE = ["interface", "-pfault_material_soil_hydraulic_conductivity", "1*m/d
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_wells_on_the_partition_interface(ranks):
     """Wells on a vertical edge and in a vertical face shared by the two ranks: each load sums to one and
-    equals the serial load; cell_values advances in substeps, repeats and refuses to go back."""
+    equals the serial load; advance_to advances in substeps, repeats and refuses to go back."""
     res = run_script("theis.py", ranks=ranks, args=INTERFACE)
     assert res["load_sum"] == pytest.approx([1.0, 1.0], rel=1e-13)
     assert max(res["load_diff_vs_serial"]) < 1e-14

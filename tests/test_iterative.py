@@ -59,7 +59,7 @@ def test_iterative_solver_reaches_the_direct_solution(tmp_path, name):
 
 def test_krylov_solves_stop_at_a_tenth_of_the_step_tolerance(tmp_path):
     """A fault step's Krylov solves stop once their true residual is below a tenth of the step's nonlinear
-    tolerance (Problem._load_tolerance), not at -ksp_rtol of a residual already below it: the coarse calibrated
+    tolerance (StepSolver.load_tolerance), not at -ksp_rtol of a residual already below it: the coarse calibrated
     Queretaro with the iterative solver against the same run with -ksp_atol 0 (Krylov to -ksp_rtol 1e-8). The
     same Newton iterations, every step converged below its tolerance, fewer Krylov iterations (measured 171
     against 246), and the same answer to what that tolerance leaves. Measured, relative to each field's largest

@@ -15,7 +15,7 @@ identical). The Queretaro runs here solve the flow to 1e-13, which puts that noi
 tolerance of the comparison.
 
 The fault scenes' Krylov solves run to -ksp_rtol here (-ksp_atol 0). At their default they stop at a tenth of
-the step's nonlinear tolerance (Problem._load_tolerance), and two runs agree only to that tolerance where they
+the step's nonlinear tolerance (StepSolver.load_tolerance), and two runs agree only to that tolerance where they
 stop at different iterates: on another partition, or where the direct solver keeps its factors for a different
 number of iterations (a decision timed in the run, so it follows the machine's load). Measured with the default,
 on a machine loaded with two other processes: continued runs 1e-7 to 4e-6 of the displacement off.

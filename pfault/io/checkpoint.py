@@ -16,8 +16,8 @@ into one contiguous block per rank, through HDF5's MPI-IO driver (pfault.io.para
 array. Otherwise the arrays are gathered to rank 0, which writes them. The files are the same either way.
 A restart reads the attributes on rank 0 (the checks), then every rank reads the datasets.
 
-What a run carries from one step to the next (pfault.solver.problem.Problem, pfault.faults.interface,
-pfault.solver.flow): the solution u, the initial state u_ref, the initial stress sigma0, each fault face's
+What a run carries from one step to the next (pfault.state.State: its own vectors, the fault interface's history
+and the flow model's): the solution u, the initial state u_ref, the initial stress sigma0, each fault face's
 initial traction ``t0``, its traction (a penalty face's shear depends on its history) and the pore pressure
 alpha p its contact law saw in the step (``pn``, which the next step's ``begin_step`` measures the faces' start
 state under), and the flow model's head, time and records. The
@@ -74,43 +74,51 @@ def _take(local, dofs):
     return np.where(dofs >= 0, local[np.maximum(dofs, 0)], 0.0)
 
 
-def local_state(sim, step, t, records):
-    """This rank's part of the state of ``sim`` (pfault.simulation.Simulation) after step ``step`` at time t:
-    ({dataset: (VERTEX, CELL or FACE, values per local vertex, local cell or owned fault face)}, root
+def local_state(model, state, step, t, records):
+    """This rank's part of ``state`` (pfault.state.State) of ``model`` (pfault.model.Model) after step ``step``
+    at time t: ({dataset: (VERTEX, CELL or FACE, values per local vertex, local cell or owned fault face)}, root
     attributes, {dataset: JSON as bytes}: the step records ``records`` and the flow model's). The attributes and
     the JSON are the same on every rank. Collective."""
-    p, mesh, dofmap = sim.problem, sim.mesh, sim.dofmap
+    mesh, dofmap, eq = model.mesh, model.dofmap, model.equations
     vdofs = vertex_dofs(dofmap)
-    f = p.faults
-    attrs = {"format": FORMAT, "step": int(step), "time_s": float(t), "scene": sim.settings.scene,
+    f = state.faults
+    flow = _flow(state)
+    attrs = {"format": FORMAT, "step": int(step), "time_s": float(t), "scene": model.settings.scene,
              "ranks": mesh.dm.getComm().getSize(), "nodes": int(mesh.n_global_vertices),
-             "cells": int(mesh.n_global_cells), "fault_faces": int(len(sim.fault_id)) if sim.fault_settings else 0,
-             "dofs": int(p.u.getSize()), "fields": json.dumps(list(dofmap.fields)),
-             "geostatic": bool(sim.settings.geostatic), "flow": sim.flow is not None}
+             "cells": int(mesh.n_global_cells), "fault_faces": int(len(model.fault_id)) if f is not None else 0,
+             "dofs": int(state.u.getSize()), "fields": json.dumps(list(dofmap.fields)),
+             "geostatic": bool(model.settings.geostatic), "flow": flow is not None}
     data = {}
-    vecs = [("u", p.u), ("u_ref", p.u_ref)]
-    if p.previous is not None:
-        vecs.append(("u_previous", p.previous[1]))
-        attrs["previous_time"] = float(p.previous[0])
-    u_local = p.local_array(p.u)
+    vecs = [("u", state.u), ("u_ref", state.u_ref)]
+    if state.previous is not None:
+        vecs.append(("u_previous", state.previous[1]))
+        attrs["previous_time"] = float(state.previous[0])
+    u_local = eq.local_array(state.u)
     for name, vec in vecs:
-        local = u_local if vec is p.u else p.local_array(vec)
+        local = u_local if vec is state.u else eq.local_array(vec)
         data[f"{name}/vertex"] = (VERTEX, _take(local, vdofs))
         if f is not None:
             data[f"{name}/face"] = (FACE, _take(local, f.lm_dofs))
-    if p.sigma0 is not None:
-        data["sigma0"] = (CELL, np.asarray(p.sigma0, dtype=float).reshape(-1, 9))
+    if state.sigma0 is not None:
+        data["sigma0"] = (CELL, np.asarray(state.sigma0, dtype=float).reshape(-1, 9))
     if f is not None:
         data["faults/t0"] = (FACE, np.asarray(f.t0, dtype=float))
         data["faults/pn"] = (FACE, np.asarray(f.pn, dtype=float))
         data["faults/traction"] = (FACE, np.asarray(f.tractions(u_local), dtype=float))
     # datasets, not attributes: a long run's records outgrow HDF5's 64 KiB attribute limit
     texts = {"steps": json.dumps(records).encode()}
-    if sim.flow is not None:
-        data["flow/head"] = (VERTEX, np.asarray(sim.flow.vertex_head(), dtype=float))
-        texts["flow/history"] = json.dumps(sim.flow.history).encode()
-        attrs["flow_time"] = float(sim.flow.time)
+    if flow is not None:
+        head, flow_time, history = flow.checkpoint()
+        data["flow/head"] = (VERTEX, np.asarray(head, dtype=float))
+        texts["flow/history"] = json.dumps(history).encode()
+        attrs["flow_time"] = float(flow_time)
     return data, attrs, texts
+
+
+def _flow(state):
+    """The state's flow model (a source with a state of its own), or None."""
+    source = state.source
+    return source if source is not None and source.has_state else None
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -135,10 +143,10 @@ class Writer:
             self.rows[FACE] = parallel.Rows(self.faces, self.n_faces)
         self.blocks = parallel.blocks(self.mpi, NAME, self.rows)
 
-    def write(self, directory, sim, step, t, records):
-        """The checkpoint of ``sim`` after step ``step`` at time t, with the run's step records up to it, into
+    def write(self, directory, model, state, step, t, records):
+        """The checkpoint of ``state`` after step ``step`` at time t, with the run's step records up to it, into
         ``directory`` (known to every rank)."""
-        data, attrs, texts = local_state(sim, step, t, records)
+        data, attrs, texts = local_state(model, state, step, t, records)
         path = os.path.join(directory, NAME)
         if self.parallel:
             self._write_parallel(path, data, attrs, texts)
@@ -265,14 +273,15 @@ def read_datasets(run_dir):
     return out
 
 
-def check(attrs, run_dir, sim):
+def check(attrs, run_dir, model, state):
     """InputError where the checkpoint (its attributes) does not belong to this scene and load (rank 0)."""
+    s = model.settings
     run_options.check_options(run_dir, dict(PETSc.Options().getAll()), float(attrs["time_s"]),
-                              sim.settings.water_density, sim.settings.gravity)
-    mine = {"nodes": int(sim.mesh.n_global_vertices), "cells": int(sim.mesh.n_global_cells),
-            "fault_faces": int(len(sim.fault_id)) if sim.fault_settings else 0,
-            "dofs": int(sim.problem.u.getSize()), "geostatic": bool(sim.settings.geostatic),
-            "flow": sim.flow is not None}
+                              s.water_density, s.gravity)
+    mine = {"nodes": int(model.mesh.n_global_vertices), "cells": int(model.mesh.n_global_cells),
+            "fault_faces": int(len(model.fault_id)) if model.faults is not None else 0,
+            "dofs": int(state.u.getSize()), "geostatic": bool(s.geostatic),
+            "flow": _flow(state) is not None}
     for key, value in mine.items():
         theirs = attrs.get(key)
         if (bool(theirs) if isinstance(value, bool) else theirs) != value:
@@ -280,12 +289,12 @@ def check(attrs, run_dir, sim):
                              f"{value}; restart with the scene and mesh options of that run")
 
 
-def restore(ckpt, attrs, sim):
-    """Put the checkpoint's state ({dataset path: serial array}, ``attrs``) into the problem (and flow model) of
-    ``sim``; every rank holds them. The time loop then goes on as after the checkpoint's step: its next step's
-    ``begin_step`` measures the faces' start from the restored u under the restored pore pressure."""
-    p, mesh, dofmap = sim.problem, sim.mesh, sim.dofmap
-    f = p.faults
+def restore(ckpt, attrs, model, state):
+    """Put the checkpoint's state ({dataset path: serial array}, ``attrs``) into ``state``; every rank holds
+    them. The time loop then goes on as after the checkpoint's step: its next step's ``begin_step`` measures the
+    faces' start from the restored u under the restored pore pressure."""
+    mesh, dofmap, eq = model.mesh, model.dofmap, model.equations
+    f = state.faults
     vdofs = vertex_dofs(dofmap)
 
     def vec(name, out):
@@ -295,37 +304,38 @@ def restore(ckpt, attrs, sim):
         if f is not None:
             lm = f.lm_dofs
             local[lm[lm >= 0]] = ckpt[f"{name}/face"][f.face][lm >= 0]
-        p.to_global(local, PETSc.InsertMode.INSERT_VALUES, out=out)
+        eq.to_global(local, PETSc.InsertMode.INSERT_VALUES, out=out)
 
-    vec("u", p.u)
-    vec("u_ref", p.u_ref)
-    p.t_now = float(attrs["time_s"])
+    vec("u", state.u)
+    vec("u_ref", state.u_ref)
+    state.time = float(attrs["time_s"])
     if "u_previous/vertex" in ckpt:
-        prev = p.u.duplicate()
+        prev = state.u.duplicate()
         vec("u_previous", prev)
-        p.set_previous(attrs["previous_time"], prev)
+        state.set_previous(attrs["previous_time"], prev)
         prev.destroy()
     if "sigma0" in ckpt:
-        p.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
+        state.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
     if f is not None:
         f.t0 = ckpt["faults/t0"][f.face].copy()
         f.set_pore_pressure(ckpt["faults/pn"][f.face])
-        f.start_from(p.local_array(p.u), ckpt["faults/traction"][f.face])
-    if sim.flow is not None:
-        sim.flow.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
-                         json.loads(bytes(ckpt["flow/history"]).decode()))
+        f.start_from(eq.local_array(state.u), ckpt["faults/traction"][f.face])
+    flow = _flow(state)
+    if flow is not None:
+        flow.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
+                     json.loads(bytes(ckpt["flow/history"]).decode()))
 
 
-def load(comm, run_dir, sim):
-    """Check the checkpoint of ``run_dir`` on rank 0, read it on every rank and restore it; returns its
-    attributes and the run's step records up to its step. Collective; an InputError is raised on every rank
-    together."""
+def load(comm, run_dir, model, state):
+    """Check the checkpoint of ``run_dir`` on rank 0, read it on every rank and restore it into ``state``;
+    returns its attributes and the run's step records up to its step. Collective; an InputError is raised on
+    every rank together."""
 
     def read_and_check():
         attrs = read_attrs(run_dir)
-        check(attrs, run_dir, sim)
+        check(attrs, run_dir, model, state)
         return attrs
     attrs = comm.tompi4py().bcast(run_on_root(comm, read_and_check), root=0)
     ckpt = run_on_all(comm, read_datasets, run_dir)
-    restore(ckpt, attrs, sim)
+    restore(ckpt, attrs, model, state)
     return attrs, json.loads(bytes(ckpt["steps"]).decode())

@@ -139,7 +139,7 @@ def fixed_head_vertices(serial, surface_names):
 
 # -- the model -------------------------------------------------------------------------------------
 class GroundwaterFlow:
-    """P1 transient flow on a LocalMesh; a pore-pressure source for the mechanics (``cell_values``).
+    """P1 transient flow on a LocalMesh; the mechanics read it through pfault.sources.FlowSource.
 
     mesh: LocalMesh; conductivity, storage: (nc,) per local cell (m/s, 1/m) or scalars; wells: Wells or
     tuples (x, y, z_top, z_bottom, rate), rate a callable Q(t) or a constant (m**3/s, positive is pumping,
@@ -147,8 +147,7 @@ class GroundwaterFlow:
     substeps: backward-Euler steps per ``advance_to`` call; lumped_mass: lumped instead of consistent
     storage matrix; prefix: options prefix of the KSP.
 
-    After construction: ``advance_to(t)``, ``step(dt)``, ``cell_values(t, cell_material, centroids)``
-    (dp per local cell, Pa), ``vertex_head()`` (h per local vertex, m), ``time``, ``history`` (one record
+    After construction: ``advance_to(t)``, ``step(dt)``, ``cell_dp()`` (dp per local cell at ``time``, Pa), ``vertex_head()`` (h per local vertex, m), ``time``, ``history`` (one record
     per step: time_s, dt_s, ksp_its, reason), ``dm`` / ``h`` (the head DM and global Vec), ``destroy()``.
     """
 
@@ -343,10 +342,9 @@ class GroundwaterFlow:
         self.time = float(time)
         self.history = [dict(r) for r in history]
 
-    def cell_values(self, t, cell_material=None, centroids=None):
-        """Pore-pressure change dp = rho_w g h (Pa) per local cell at time t (advancing to t if needed);
-        h is the cell average of the P1 head. Same interface as MaterialDrawdown.cell_values."""
-        self.advance_to(t)
+    def cell_dp(self):
+        """Pore-pressure change dp = rho_w g h (Pa) per local cell at the model's current time (``time``); h is
+        the cell average of the P1 head."""
         return self.rho_g * self.h_local[self.mesh.cells].mean(axis=1)
 
     def destroy(self):

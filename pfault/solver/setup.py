@@ -84,7 +84,7 @@ def apply_solver_defaults(linear=False, penalty=False):
     step: SNES type ksponly. A fault scene runs Newton (newtonls) on the semismooth residual: full steps with
     Lagrange faces only, backtracking steps when a fault has penalty faces (``penalty``); its step-size test is
     off (-snes_stol 0: the unknowns mix metres and pascals, so a relative step size means nothing), its absolute
-    tolerance is set per step from the load unless given (Problem._load_tolerance). A direct factorisation is
+    tolerance is set per step from the load unless given (pfault.solver.policy.StepSolver.load_tolerance). A direct factorisation is
     applied once per linear solve (preonly)."""
     opts = PETSc.Options()
     if linear:
@@ -113,7 +113,7 @@ def apply_solver_defaults(linear=False, penalty=False):
             set_default("ksp_type", "preonly")
         else:
             # Flexible GMRES on the factorised Jacobian: one iteration after a factorisation, a few while its
-            # factors are kept (Problem.jacobian: while few faces' states changed since). Keeping them
+            # factors are kept (pfault.solver.policy.FactorReuse: while few faces' states changed since). Keeping them
             # for a fixed number of Newton iterations whatever the states (-snes_lag_preconditioner 3) was
             # slower: calibrated Queretaro 216 s against 98 s, 160-320 triangular solves per step at 0.14 s each.
             # FGMRES keeps the preconditioned directions, so it applies the factors once per iteration; GMRES

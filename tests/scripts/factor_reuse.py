@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Direct fault solves keep their factors across a few faces' state changes (Problem._reuse_budget); FGMRES on
+"""Direct fault solves keep their factors across a few faces' state changes (FactorReuse.budget); FGMRES on
 the old factors must reach the same Newton iterates as a fresh factorisation.
 
     mpirun -n 2 python tests/scripts/factor_reuse.py -pfault_output_dir DIR
@@ -22,11 +22,11 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from pfault.simulation import Simulation  # noqa: E402
-from pfault.solver.problem import Problem  # noqa: E402
+from pfault.solver.policy import FactorReuse  # noqa: E402
 
 
 def run(budget, outdir):
-    Problem._reuse_budget = lambda self: budget
+    FactorReuse.budget = lambda self: budget
     PETSc.Options().setValue("pfault_output_dir", outdir)
     sim = Simulation(SCENE, sys.argv)
     sim.setup()

@@ -21,9 +21,9 @@ from pfault.simulation import Simulation  # noqa: E402
 
 sim = Simulation(SCENE, sys.argv)
 sim.setup()
-faults = sim.problem.faults
+faults = sim.model.faults
 counts = [int(c) for c in faults.mpi.allgather(faults.nf)]
-mesh = sim.mesh
+mesh = sim.model.mesh
 owned = faults.mpi.gather(mesh.cell_serial)      # (no overlap: every local cell is owned)
 out = {"ranks": PETSc.COMM_WORLD.size, "faces_per_rank": counts, "fault_faces": int(faults.nf_total)}
 if owned is not None:

@@ -21,11 +21,11 @@ from pfault.simulation import Simulation  # noqa: E402
 
 sim = Simulation("config/two_blocks.opts", sys.argv)
 sim.setup()
-p, f = sim.problem, sim.problem.faults
-f.begin_step(p.local_array(p.u))
-p.jacobian(sim.snes, p.u, p.J, p.J)
+p, f = sim.model.equations, sim.model.faults
+f.begin_step(p.local_array(sim.state.u))
+p.assemble_jacobian(sim.state.u, p.J)
 J = p.J.convert("dense").getDenseArray().copy()
-loc = np.zeros(sim.dofmap.n_local)
+loc = np.zeros(sim.model.dofmap.n_local)
 loc[f.lm_dofs.ravel()] = 1.0
 mark = p.to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray() > 0.5
 # the constraint rows of stuck faces are -c (A g + S dt) (forces); in jump units A g + S dt the saddle point is

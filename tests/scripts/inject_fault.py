@@ -24,26 +24,33 @@ scene, rest = check_arguments(argv)
 petsc4py.init([argv[0], "-options_file", scene] + rest)
 from petsc4py import PETSc  # noqa: E402
 
-from pfault import cli  # noqa: E402
+from pfault import cli, simulation  # noqa: E402
+from pfault.io import parallel  # noqa: E402
+from pfault.io.observers import Observer  # noqa: E402
 from pfault.io.output import RunWriter  # noqa: E402
-from pfault.io.parallel import ParallelSeries  # noqa: E402
-from pfault.simulation import Simulation  # noqa: E402
 from pfault.solver.flow import FlowNotConverged  # noqa: E402
 
-solve, write_step, write_part = Simulation._solve, RunWriter.write_step, ParallelSeries._fill
-step_done = Simulation._step_done
+write_step, write_block = RunWriter.write_step, parallel.write_block
+here = PETSc.COMM_WORLD.rank == rank
 
 
-def faulty_solve(self, t, t_prev=0.0):
-    here = PETSc.COMM_WORLD.rank == rank and abs(t - self.settings.time_end * step / self.settings.time_steps) \
-        < 1e-9 * self.settings.time_end
-    if here and kind == "bug":
-        raise RuntimeError(f"injected fault in step {step}")
-    if here and kind == "memory":
-        raise MemoryError(f"injected: unable to allocate 8 GiB in step {step}")
-    if kind == "flow" and abs(t - self.settings.time_end * step / self.settings.time_steps) < 1e-9 * t:
-        raise FlowNotConverged(f"groundwater flow: injected: KSP flow_ did not converge in step {step}")
-    return solve(self, t, t_prev)
+class Faults(Observer):
+    """Raises the injected fault when step ``step`` starts (bug, memory, flow) or once it is done and its fields
+    are written, before its checkpoint and summary (bug_at_step_end: given to the run before those observers)."""
+
+    def step_started(self, number, t):
+        if number != step:
+            return
+        if here and kind == "bug":
+            raise RuntimeError(f"injected fault in step {step}")
+        if here and kind == "memory":
+            raise MemoryError(f"injected: unable to allocate 8 GiB in step {step}")
+        if kind == "flow":
+            raise FlowNotConverged(f"groundwater flow: injected: KSP flow_ did not converge in step {step}")
+
+    def step_done(self, result):
+        if kind == "bug_at_step_end" and result.step == step and here:
+            raise RuntimeError(f"injected fault at the end of step {step}")
 
 
 def faulty_write_step(self, number, t, point_data, cell_data):
@@ -52,22 +59,22 @@ def faulty_write_step(self, number, t, point_data, cell_data):
     return write_step(self, number, t, point_data, cell_data)
 
 
-def faulty_write_part(datasets):
-    ds = datasets[0][0]
-    if kind == "disk_full" and ds.file.filename.endswith("fields.h5") and ds.parent.name == f"/steps/{step:06d}" and \
-            PETSc.COMM_WORLD.rank == rank:
+def faulty_write_block(ds, start, value):
+    if kind == "disk_full" and ds.file.filename.endswith("fields.h5") and ds.parent.name == f"/steps/{step:06d}" \
+            and here:
         raise OSError(errno.ENOSPC, "No space left on device", "fields.h5")
-    return write_part(datasets)
+    return write_block(ds, start, value)
 
 
-def faulty_step_done(self, steps, rec, number, t):
-    if kind == "bug_at_step_end" and number == step and PETSc.COMM_WORLD.rank == rank:
-        raise RuntimeError(f"injected fault at the end of step {step}")
-    return step_done(self, steps, rec, number, t)
+class InjectedSimulation(simulation.Simulation):
+    """The run with the injected faults observing each step after its fields, before its checkpoint."""
+
+    def observers(self, output, records):
+        own = super().observers(output, records)
+        return own[:2] + [Faults()] + own[2:]
 
 
-Simulation._solve = faulty_solve
-Simulation._step_done = faulty_step_done
+simulation.Simulation = InjectedSimulation
 RunWriter.write_step = faulty_write_step
-ParallelSeries._fill = staticmethod(faulty_write_part)
+parallel.write_block = faulty_write_block
 sys.exit(cli.main(scene, argv))

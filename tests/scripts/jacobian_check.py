@@ -37,9 +37,9 @@ COMM = PETSc.COMM_WORLD
 def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noise=1e5):
     """x: small random displacement + a uniform jump `offset` (global) of the plus side of the fault, random
     multipliers around t_mean (one row, or one row per owned face); v: random, zero on Dirichlet rows."""
-    p, f, dm = sim.problem, sim.problem.faults, sim.dofmap
-    x = p.u.duplicate()
-    v = p.u.duplicate()
+    p, f, dm = sim.model.equations, sim.model.faults, sim.model.dofmap
+    x = sim.state.u.duplicate()
+    v = sim.state.u.duplicate()
     rstart, rend = x.getOwnershipRange()
     n = rend - rstart
     lm = (f.g_lm[f.lagrange].ravel() - rstart) if f.nf else np.zeros(0, np.int64)
@@ -61,17 +61,17 @@ def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noi
 
 
 def taylor(sim, x, v):
-    p = sim.problem
+    p = sim.model.equations
     F0, Fh, Jv, xh = x.duplicate(), x.duplicate(), x.duplicate(), x.duplicate()
-    p.residual(sim.snes, x, F0)
-    p.jacobian(sim.snes, x, p.J, p.J)
+    p.residual(None, x, F0)
+    p.assemble_jacobian(x, p.J)
     p.J.mult(v, Jv)
     states0 = p.faults.states(p.local_array(x), exact=True)
     e1, e2, same = [], [], True
     for h in H:
         x.copy(xh)
         xh.axpy(h, v)
-        p.residual(sim.snes, xh, Fh)
+        p.residual(None, xh, Fh)
         Fh.axpy(-1.0, F0)
         e1.append(Fh.norm())
         Fh.axpy(-h, Jv)
@@ -108,7 +108,7 @@ G_PREV = (0.0, 1e-3, 2e-3)
 def lagrange_cases(results):
     sim = Simulation(SCENE, sys.argv)
     sim.setup()
-    p, f = sim.problem, sim.problem.faults
+    p, f = sim.model.equations, sim.model.faults
     p.set_load(1.0)
     rng = np.random.default_rng(1234 + COMM.rank)
     counts = COMM.tompi4py().allgather(f.nf)
@@ -133,7 +133,7 @@ def penalty_cases(results):
     opts.setValue("pfault_fault_fault_method", "penalty")
     sim = Simulation(SCENE, sys.argv)
     sim.setup()
-    p, f = sim.problem, sim.problem.faults
+    p, f = sim.model.equations, sim.model.faults
     p.set_load(1.0)
     rng = np.random.default_rng(4321 + COMM.rank)
     k = float(np.mean(f.penalty_law.c_n)) if f.nf else 0.0

@@ -19,7 +19,8 @@ from pfault.mesh.box import box_mesh  # noqa: E402
 from pfault.physics import elasticity as el  # noqa: E402
 from pfault.physics.loading import MaterialDrawdown  # noqa: E402
 from pfault.scene import Material  # noqa: E402
-from pfault.solver.problem import Problem as ElasticProblem  # noqa: E402
+from pfault.solver.equations import Equations  # noqa: E402
+from pfault.sources import TableSource  # noqa: E402
 
 E, NU = 1.0e7, 0.3
 C = np.array([1.0, -0.5, 0.75]) * 1e-2
@@ -71,7 +72,8 @@ def solve(n):
     mesh = distributed.build(comm, serial, vert_constraint=mask)
     dofmap = fields.build(mesh)
     asm = ElasticAssembler(mesh, dofmap, [Material("soil", E, NU, 1.0, 2000.0)])
-    prob = ElasticProblem(mesh, dofmap, asm, [], MaterialDrawdown([None]), None)
+    prob = Equations(mesh, dofmap, asm, [], TableSource(MaterialDrawdown([None]), mesh.cell_material), None)
+    u = prob.create_vec()
     x = mesh.coords[mesh.cells]                       # (nc,4,3)
     xq = np.einsum("qa,nai->nqi", BARY, x)            # (nc,4q,3)
     bq = body_force(xq)
@@ -81,8 +83,9 @@ def solve(n):
     ksp = PETSc.KSP().create(comm=comm)
     ksp.setOperators(prob.K, prob.K)
     ksp.setFromOptions()
-    ksp.solve(prob.f, prob.u)
-    u = prob.local_array(prob.u)
+    ksp.solve(prob.f, u)
+    u_vec, u = u, prob.local_array(u)
+    u_vec.destroy()
     ue = asm.cell_displacements(u)                    # (nc,4,3)
     uq = np.einsum("qa,nai->nqi", BARY, ue)
     err = uq - exact(xq)

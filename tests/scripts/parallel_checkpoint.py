@@ -24,27 +24,41 @@ from petsc4py import PETSc  # noqa: E402
 
 from pfault.errors import run_on_root  # noqa: E402
 from pfault.io import checkpoint  # noqa: E402
+from pfault.io.observers import Observer  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
+
+
+class Gathered(Observer):
+    """After the run's own checkpoint of a converged step: a copy of it, and the same state written by a
+    gathering writer."""
+
+    def __init__(self, sim, output, records):
+        self.sim, self.output, self.records = sim, output, records
+        self.steps_written = []
+
+    def step_done(self, result):
+        if not result.record["converged"]:
+            return
+        out, sim = self.output, self.sim
+        gathered = checkpoint.Writer(sim.comm, sim.model.mesh, out.checkpoint.faces, out.checkpoint.n_faces,
+                                     parallel_io=False)
+        mine, theirs = (os.path.join(d, str(result.step)) for d in (own_dir, gathered_dir))
+
+        def copy():
+            os.makedirs(theirs)
+            shutil.copytree(out.run_path, mine, ignore=lambda d, names: [n for n in names if n != checkpoint.NAME])
+        run_on_root(sim.comm, copy)
+        gathered.write(theirs, sim.model, sim.state, result.step, result.t, self.records)
+        self.steps_written.append(result.step)
 
 
 class Twice(Simulation):
     """A Simulation whose checkpoint is also written by a gathering writer after every completed step."""
-    steps_written = []
+    gathered = None
 
-    def _step_done(self, steps, rec, step, t):
-        super()._step_done(steps, rec, step, t)
-        if not rec["converged"]:
-            return
-        gathered = checkpoint.Writer(self.comm, self.mesh, self.checkpoint.faces, self.checkpoint.n_faces,
-                                     parallel_io=False)
-        mine, theirs = (os.path.join(d, str(step)) for d in (own_dir, gathered_dir))
-
-        def copy():
-            os.makedirs(theirs)
-            shutil.copytree(self.run_path, mine, ignore=lambda d, names: [n for n in names if n != checkpoint.NAME])
-        run_on_root(self.comm, copy)
-        gathered.write(theirs, self, step, t, steps)
-        self.steps_written.append(step)
+    def observers(self, output, records):
+        self.gathered = Gathered(self, output, records)
+        return super().observers(output, records) + [self.gathered]
 
 
 comm = PETSc.COMM_WORLD
@@ -54,14 +68,15 @@ sim.run()
 run_on_root(comm, sim.write_summary, 0.0)
 mpi = comm.tompi4py()
 blocks = {}
-if sim.checkpoint.parallel:
-    for kind, rows in sim.checkpoint.rows.items():
-        b = sim.checkpoint.blocks[kind]
+ck = sim.output.checkpoint
+if ck.parallel:
+    for kind, rows in ck.rows.items():
+        b = ck.blocks[kind]
         outside = int(((rows.rows < b.start) | (rows.rows >= b.stop)).sum())
         blocks[kind] = mpi.allgather((b.stop - b.start, outside))
 import h5py  # noqa: E402
-info = {"ranks": comm.size, "parallel": sim.checkpoint.parallel, "h5py_mpi": bool(h5py.get_config().mpi),
-        "steps": sim.steps_written, "blocks": blocks}
+info = {"ranks": comm.size, "parallel": ck.parallel, "h5py_mpi": bool(h5py.get_config().mpi),
+        "steps": sim.gathered.steps_written, "blocks": blocks}
 sim.destroy()
 if comm.rank == 0:
     print(json.dumps(info))

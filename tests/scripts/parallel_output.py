@@ -8,7 +8,6 @@ h5py built with MPI, written by every rank: pfault.io.parallel) into -pfault_out
 Prints JSON {"ranks": N, "parallel": whether the run's output was written in parallel, "h5py_mpi": whether
 h5py has MPI, "runs": {series: {center: contiguous runs of rows per rank}}}.
 """
-import dataclasses
 import json
 import sys
 
@@ -18,30 +17,46 @@ scene, gathered_dir = sys.argv[1], sys.argv[2]
 petsc4py.init([sys.argv[0], "-options_file", scene] + sys.argv[3:])
 from petsc4py import PETSc  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 from pfault.errors import run_on_root  # noqa: E402
+from pfault.io.observers import Observer  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
+
+
+class Mirror(Observer):
+    """Every output step written again by a gathering StepOutput into gathered_dir, after the run's own: the
+    land surface's hazard maxima must be the same."""
+
+    def __init__(self, output):
+        self.output = output
+        self.writer = self.fields = None
+
+    def step_done(self, result):
+        if not result.output:
+            return
+        out = self.output
+        if self.writer is None:
+            self.writer = run_on_root(out.comm, out.create_writer, gathered_dir)
+            self.fields = out.step_output(self.writer, parallel=False)
+            self.write(0, 0.0, np.zeros(len(result.u_rel)), initial=True)
+        again = self.write(result.step, result.t, result.u_rel)
+        assert again == (result.derived or None), (again, result.derived)
+
+    def write(self, step, t, u_rel, initial=False):
+        maxima = self.fields.write(step, t, self.output.step_values(t, u_rel, initial))
+        run_on_root(self.output.comm, lambda: self.writer.commit())      # the writer: rank 0 only
+        return maxima
 
 
 class Twice(Simulation):
     """A Simulation whose every output step is also written by a gathering StepOutput into gathered_dir."""
     mirror = None
 
-    def _output(self, step, t, u_rel_local, initial=False):
-        if self.mirror is None:
-            own = self.settings
-            self.settings = dataclasses.replace(own, output_dir=gathered_dir)
-            writer = run_on_root(self.comm, self._create_writer)
-            self.settings = own
-            self.mirror = writer, self._step_output(writer, parallel=False)
-        maxima = super()._output(step, t, u_rel_local, initial)
-        own, self.output = self.output, self.mirror[1]
-        try:
-            again = super()._output(step, t, u_rel_local, initial)
-        finally:
-            self.output = own
-        assert again == maxima
-        run_on_root(self.comm, lambda: self.mirror[0].commit())      # the writer: rank 0 only
-        return maxima
+    def observers(self, output, records):
+        own = super().observers(output, records)
+        self.mirror = Mirror(output)
+        return own[:2] + [self.mirror] + own[2:]
 
 
 comm = PETSc.COMM_WORLD
@@ -49,8 +64,8 @@ sim = Twice(scene, sys.argv)
 sim.setup()
 sim.run()
 run_on_root(comm, sim.write_summary, 0.0)
-run_on_root(comm, lambda: sim.mirror[0].close())
-out = sim.output
+run_on_root(comm, lambda: sim.mirror.writer.close())
+out = sim.output.fields
 blocks = {}
 if out.parallel:
     # per series and kind of row, every rank's (block it writes, rows it holds outside that block)

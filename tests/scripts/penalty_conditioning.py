@@ -67,17 +67,17 @@ def one(method, k=None):
         opts.setValue("pfault_fault_fault_penalty_tangential", repr(k))
     sim = Simulation(SCENE, sys.argv)
     sim.setup()
-    p, f, dm = sim.problem, sim.problem.faults, sim.dofmap
+    p, f, dm = sim.model.equations, sim.model.faults, sim.model.dofmap
     p.set_load(1.0)
-    x = p.u.duplicate()
+    x = sim.state.u.duplicate()
     loc = np.zeros(dm.n_local)
     # a slight interpenetration: every face closed and stuck (Lagrange and penalty)
     loc[dm.vertex_dofs(1)[dm.vert_sides > 1]] = (-1e-9, 0.0, 0.0)
     p.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=x)
     F = x.duplicate()
-    p.residual(sim.snes, x, F)
+    p.residual(None, x, F)
     F.scale(-1.0)
-    p.jacobian(sim.snes, x, p.J, p.J)
+    p.assemble_jacobian(x, p.J)
     out = {}
     for pc in pcs:
         out[pc] = solve(p, f, x, F, pc)

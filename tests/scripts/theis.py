@@ -15,7 +15,7 @@ far boundary is not felt yet).
 Mode ``interface``: wells placed on the partition interface (on a vertical mesh edge shared by both ranks
 and inside a shared vertical face), settings read from -pfault_ options with read_flow_settings. Checks
 that every well load sums to 1 and equals the serial NumPy load; runs two mechanical steps through
-``cell_values``.
+``advance_to`` and ``cell_dp``.
     theis.py interface -pfault_... (see tests/test_flow.py)
     prints {"load_sum", "load_diff_vs_serial", "wells", "dp_min", "dp_mean_check", "history", "went_back"}
 
@@ -150,9 +150,12 @@ def interface(comm):
             ref = np.bincount(serial.tets.ravel(), weights=(length[:, None] * mid).ravel(),
                               minlength=len(serial.points)) / (well.z_top - well.z_bottom)
             out["load_diff_vs_serial"].append(float(np.abs(gathered[:, 0] - ref).max()))
-    dp1 = flow.cell_values(0.5 * 86400.0, cmat)
-    dp2 = flow.cell_values(86400.0, cmat)
-    dp_again = flow.cell_values(86400.0, cmat)
+    flow.advance_to(0.5 * 86400.0)
+    dp1 = flow.cell_dp()
+    flow.advance_to(86400.0)
+    dp2 = flow.cell_dp()
+    flow.advance_to(86400.0)
+    dp_again = flow.cell_dp()
     h = flow.vertex_head()
     out["dp_mean_check"] = mpi.allreduce(float(np.abs(dp2 - 1000.0 * 9.80665 * h[mesh.cells].mean(axis=1)).max()
                                                if len(dp2) else 0.0), op=MPI.MAX)
@@ -161,7 +164,7 @@ def interface(comm):
     out["repeat_identical"] = bool(mpi.allreduce(int(np.array_equal(dp2, dp_again)), op=MPI.MIN))
     out["history"] = [{k: v for k, v in h.items() if k != "ksp_its"} for h in flow.history]
     try:
-        flow.cell_values(0.25 * 86400.0, cmat)
+        flow.advance_to(0.25 * 86400.0)
         out["went_back"] = True
     except ValueError:
         out["went_back"] = False

@@ -1,0 +1,287 @@
+"""The observers of a run's steps (pfault.run): the progress line, the fields (volume, faults, land surface and
+hazard map), the checkpoint and the summary. ``RunOutput`` is the run's directory they write into: staged, then
+put in place after the first completed step, so that a run that fails before it leaves nothing behind."""
+
+from __future__ import annotations
+
+import errno
+import shutil
+from typing import Any, Callable
+
+import numpy as np
+from petsc4py import PETSc
+
+from ..effects import logged
+from ..errors import EXIT_NOT_CONVERGED, InputError, OutputError, run_on_root
+
+
+def format_time(t: float) -> str:
+    year = 365.25 * 86400.0
+    if t >= 0.01 * year:
+        return f"{t / year:8.4g} yr"
+    if t >= 86400.0:
+        return f"{t / 86400.0:8.4g} d"
+    return f"{t:8.4g} s"
+
+
+def progress_line(step: int, rec: dict) -> str:
+    """One line per step: time, Newton and Krylov iterations, factorisations, wall time, the faces' states, the
+    largest subsidence, opening and slip, and why a step failed."""
+    extra = ""
+    if "stick" in rec:
+        extra += f"  stick/slip/open {rec['stick']}/{rec['slip']}/{rec['open']}"
+    if "max_subsidence_m" in rec:
+        extra += f"  subsidence {rec['max_subsidence_m']:.4g} m"
+    if "max_fault_opening_m" in rec:
+        extra += f"  opening {rec['max_fault_opening_m']:.3g} m  slip {rec['max_fault_slip_m']:.3g} m"
+    if rec.get("substeps", 1) > 1:
+        extra += f"  ({rec['substeps']} sub-steps)"
+    if not rec["converged"]:
+        why = f"reason {rec['reason']}"
+        if rec.get("null_pivots"):
+            why += (f"; singular Jacobian: {rec['null_pivots']} null pivots, part of the body held by nothing "
+                    "but open or unstabilised fault faces")
+        extra += f"  NOT CONVERGED ({why})"
+    return (f"step {step:4d} t = {format_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
+            f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
+            + f"  wall {rec['wall_s']:7.2f} s{extra}")
+
+
+class Observer:
+    """Does nothing; observers override what they observe."""
+
+    def step_started(self, step: int, t: float) -> None:
+        pass
+
+    def step_done(self, result: Any) -> None:
+        pass
+
+
+class ProgressLine(Observer):
+    def step_done(self, result: Any) -> None:
+        PETSc.Sys.Print(progress_line(result.step, result.record))
+
+
+class RunOutput:
+    """The run's output directory and its writers (pfault.io.output.RunWriter on rank 0, pfault.io.steps.StepOutput
+    and pfault.io.checkpoint.Writer on every rank). Opened after the first solve (``open``); every method is
+    collective unless it says otherwise."""
+
+    def __init__(self, model: Any, state: Any, argv: list, restart_dir: str | None = None,
+                 restart_step: int | None = None) -> None:
+        self.model, self.state, self.argv = model, state, list(argv)
+        self.comm = model.comm
+        self.restart_dir, self.restart_step = restart_dir, restart_step
+        self.writer = None                  # rank 0, once open
+        self.staging = self.run_path = None     # where the output goes (every rank, once it is opened)
+        self.committed = False              # the run's directory is in place
+        self.fields = self.checkpoint = None
+        self.surface = None
+
+    @property
+    def is_open(self) -> bool:
+        return self.fields is not None
+
+    def open(self) -> None:
+        """Stage the output directory and write the initial state, or on a restart the output steps of the run
+        it continues. Nothing is written before this, and the output directory is replaced only after the first
+        completed step (RunWriter.commit)."""
+        from . import checkpoint, parallel as par
+        from .steps import StepOutput
+        self.writer = run_on_root(self.comm, self._create_writer)
+        # where the run writes, known to every rank: one that fails alone says there how the run ended
+        w = self.writer
+        self.staging, self.run_path = self.comm.tompi4py().bcast((w.dir, w.path) if self.comm.rank == 0 else None)
+        m = self.model
+        parallel = par.available(self.comm)
+        self.fields = self.step_output(self.writer, parallel)
+        faces = None if m.faults is None else m.faults.face
+        self.checkpoint = checkpoint.Writer(self.comm, m.mesh, faces=faces,
+                                            n_faces=0 if m.faults is None else len(m.fault_id),
+                                            parallel_io=parallel)
+        if not self.restart_dir:
+            self.write_fields(0, 0.0, np.zeros(m.dofmap.n_local), initial=True)
+
+    def step_output(self, writer: Any, parallel: bool) -> Any:
+        """A StepOutput writing through ``writer`` (rank 0); ``parallel``: the volume and fault fields written
+        by every rank."""
+        from .steps import StepOutput
+        m = self.model
+        mpi = self.comm.tompi4py()
+        split = mpi.bcast(m.split.split_vertices if self.comm.rank == 0 and m.split is not None else None)
+        return StepOutput(self.comm, m.mesh, writer, np.zeros(0, np.int64) if split is None else split,
+                          faces=None if m.faults is None else m.faults.face,
+                          fault_id=None if m.faults is None else m.fault_id,
+                          surface=self.surface if self.comm.rank == 0 else None, parallel=parallel)
+
+    def output_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """Output mesh on rank 0: split fault vertices appear twice, plus-side cells use the copies."""
+        serial, split = self.model.serial, self.model.split
+        pts, tets = serial.points, serial.tets
+        if split is None:
+            return pts, tets
+        sv = split.split_vertices
+        copy = np.full(len(pts), -1)
+        copy[sv] = len(pts) + np.arange(len(sv))
+        tets = np.where(split.cell_side == 1, copy[tets], tets)
+        return np.concatenate([pts, pts[sv]]), tets
+
+    def create_writer(self, output_dir: str) -> Any:
+        """A RunWriter into ``output_dir`` (rank 0)."""
+        from . import hazard
+        from .output import RunWriter
+        m = self.model
+        points, tets = self.output_mesh()
+        self.surface = hazard.land_surface(points, tets, m.serial, m.split, m.settings.ground_surface)
+        try:
+            writer = RunWriter(output_dir, points, tets, m.serial.cell_material, m.scene.material_names,
+                               fault_mesh=None if m.split is None else (m.serial.points, m.split.faces,
+                                                                        m.split.fault_id),
+                               surface_mesh=None if self.surface is None else (self.surface.points,
+                                                                               self.surface.triangles))
+            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            if self.restart_dir:
+                writer.continue_from(self.restart_dir, self.restart_step)
+        except ValueError as exc:       # the series of the run it continues are of another mesh
+            raise InputError(f"-pfault_restart {self.restart_dir}: {exc}") from None
+        except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+                raise                   # a full disk: pfault.errors.as_pfault_error words it
+            raise OutputError(f"-pfault_output_dir {output_dir}: cannot write there ({exc})") from None
+        return writer
+
+    def _create_writer(self) -> Any:
+        return self.create_writer(self.model.settings.output_dir)
+
+    def step_values(self, t: float, u_rel: np.ndarray, initial: bool = False) -> Any:
+        """This rank's values of one output step (pfault.io.steps.LocalStep)."""
+        from .steps import LocalStep
+        m, state = self.model, self.state
+        eq, dofmap = m.equations, m.dofmap
+        both = np.concatenate([u_rel[dofmap.vertex_dofs(0)], u_rel[dofmap.vertex_dofs(1)]], axis=1)
+        u_total = eq.local_array(state.u_ref if initial else state.u)
+        dp = eq.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
+        sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
+        faults = _fault_fields(m.faults, u_total, u_rel) if m.faults is not None else None
+        head = m.source.vertex_head()
+        return LocalStep(both, head, {"pore_pressure_change": dp, "stress": sig}, faults)
+
+    def write_fields(self, step: int, t: float, u_rel: np.ndarray, initial: bool = False) -> dict | None:
+        """Write one output step (fields, fault, land surface); returns the land surface's hazard maxima (every
+        rank), None without a land surface."""
+        return self.fields.write(step, t, self.step_values(t, u_rel, initial))
+
+    def write_summary(self, summary: dict) -> None:
+        """The summary so far, and the first time the run's directory put in place (every rank)."""
+        def write():
+            self.writer.write_summary(summary)
+            self.writer.commit()
+        run_on_root(self.comm, write)      # a failure to write ends every rank
+        self.committed = True              # the run's directory is in place (RunWriter.commit)
+
+    def close(self) -> None:
+        if self.fields is not None:
+            self.fields.close()
+
+    def finish(self, summary: dict, figures: bool) -> None:
+        """Rank 0: the final summary.json, then the figures."""
+        import time
+        if self.writer is None:
+            return
+        self.writer.write_summary(summary)
+        self.writer.commit()
+        self.writer.close()
+        if figures and not summary["interrupted"]:
+            from .figures import write_run_figures
+            t0 = time.perf_counter()
+            paths = write_run_figures(self.writer.dir)
+            PETSc.Sys.Print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
+
+    def record_failure(self, line: str, code: int) -> None:
+        """Rank 0, after every rank failed together: summary.json of a run in place says how it ended (best
+        effort: the failure may be the full disk itself)."""
+        if self.writer is None:
+            return
+        try:
+            self.writer.write_failure(line, code, not_converged=code == EXIT_NOT_CONVERGED)
+        except (OSError, ValueError):
+            pass
+
+    def last_words(self, line: str, code: int) -> None:
+        """This rank failed alone and aborts the MPI job next (pfault.errors.RunGuard.settle); the other ranks
+        wait in a collective call, write nothing and are stopped with the job. Whichever rank this is, it
+        says how the run ended in the summary.json of a run directory in place (that of the last completed
+        step: every rank knows it is in place once that step is done), or removes the staging directory of a
+        run that has not completed a step. Best effort: the failure may be the full disk itself."""
+        from .output import record_failure
+        writer = self.writer
+        if self.run_path is None:
+            return                                  # nothing written yet
+        committed = writer.committed if writer is not None else self.committed
+        try:
+            if committed:
+                record_failure(self.run_path, line, code, not_converged=code == EXIT_NOT_CONVERGED)
+            elif writer is None:
+                shutil.rmtree(self.staging, ignore_errors=True)
+        except (OSError, ValueError):
+            pass
+        if writer is not None:
+            writer.abandon()                        # closes its files; a directory in place stays
+
+    def destroy(self) -> None:
+        if self.fields is not None:
+            try:
+                self.fields.close()       # collective: every rank destroys the run after a failure
+            except Exception:  # noqa: BLE001  (best effort: the run has failed already)
+                pass
+        if self.comm.rank == 0 and self.writer is not None:
+            self.writer.abandon()         # nothing happens to a run directory already in place
+
+
+def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray) -> dict:
+    """Per fault face this rank owns: tractions from the total state, jumps relative to the initial state."""
+    t_loc, _, t_glob, _, state = fs.face_fields(u_total)
+    g, gl = fs.jumps(u_rel)
+    return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.normal,
+            "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.normal,
+            "slip_magnitude": np.linalg.norm(gl[:, 1:], axis=1), "state": np.asarray(state, dtype=np.int64),
+            "traction_normal_effective": fs.effective(t_loc)[:, 0]}
+
+
+class FieldOutput(Observer):
+    """The fields of every output step (volume, faults, land surface); the land surface's hazard maxima go to
+    the step's derived figures."""
+
+    def __init__(self, output: RunOutput) -> None:
+        self.output = output
+
+    def step_done(self, result: Any) -> None:
+        if result.output:
+            hz = self.output.write_fields(result.step, result.t, result.u_rel)
+            if hz is not None:
+                result.derived.update(hz)
+
+
+class CheckpointObserver(Observer):
+    """checkpoint.h5 after every converged step: the state and the step records so far."""
+
+    def __init__(self, output: RunOutput, state: Any, records: list) -> None:
+        self.output, self.state, self.records = output, state, records
+
+    def step_done(self, result: Any) -> None:
+        if result.record["converged"]:
+            out = self.output
+            with logged("pfaultCheckpoint"):
+                out.checkpoint.write(out.run_path if out.committed else out.staging, out.model, self.state,
+                                     result.step, result.t, self.records)
+
+
+class SummaryObserver(Observer):
+    """summary.json after every step (``running``: true until the run ends); the first completed step puts the
+    run's directory in place."""
+
+    def __init__(self, output: RunOutput, compose: Callable[..., dict], records: list) -> None:
+        self.output, self.compose, self.records = output, compose, records
+
+    def step_done(self, result: Any) -> None:
+        self.output.write_summary(self.compose(self.records, result.record["converged"], None, running=True))

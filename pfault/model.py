@@ -1,0 +1,226 @@
+"""The model of a run: built once from the settings, unchanged while the run goes on.
+
+``build_model`` reads the scene (settings, materials, boundaries, faults, the pore-pressure source), builds the
+mesh on rank 0 and distributes it (PETSc log stage Mesh), then the fields, the assembler, the fault interface,
+the source and the equations (stage Setup). What changes during the run is ``pfault.state.State``'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from petsc4py import PETSc
+
+from . import checks, fields, scene as scn
+from .assembly.elastic import ElasticAssembler
+from .effects import logged
+from .effects import decide as decide_effects
+from .errors import InputError, run_on_root
+from .mesh import distributed
+from .solver.equations import Equations, constrained_local
+from .sources import FlowSource, TableSource
+
+
+@dataclass(frozen=True)
+class Scene:
+    """What the options ask for (every rank): settings, the names the mesh defines, the parts' settings."""
+    settings: Any
+    restart_dir: str | None
+    figures: bool
+    solver_file: str | None
+    material_names: list
+    surface_names: list
+    materials: list
+    drawdown: Any                   # per-material tables (pfault.physics.loading.MaterialDrawdown)
+    flow_settings: Any              # the flow model's settings, or None
+    fault_settings: list
+    boundaries: list
+    contact: Any                    # contact options (None without faults)
+    effects: Any
+
+
+@dataclass(frozen=True)
+class Model:
+    """A run's model. ``serial`` and ``split`` (the serial mesh and its fault split) are held by rank 0 only;
+    ``faults`` is the fault interface (None without faults), ``fault_id`` the fault of every fault face (serial
+    order; None without faults), ``source`` the pore-pressure source, ``equations`` the discrete problem."""
+    comm: Any
+    scene: Scene
+    serial: Any
+    split: Any
+    mesh: Any
+    dofmap: Any
+    assembler: Any
+    fault_id: Any
+    faults: Any
+    source: Any
+    equations: Any
+    wall: dict
+
+    @property
+    def settings(self) -> Any:
+        return self.scene.settings
+
+    def destroy(self) -> None:
+        """Collective: every rank destroys the model at once (left to the garbage collector, which may free the
+        objects on some ranks only, PETSc 3.18's PetscFinalize waits for ever in its collective cleanup)."""
+        self.equations.destroy()
+        self.source.destroy()
+        self.dofmap.section.destroy()
+        if self.mesh.migration is not None:
+            self.mesh.migration.destroy()
+        self.mesh.dm.destroy()
+
+
+def _check_restart_dir(path: str) -> None:
+    if not os.path.isdir(path):
+        raise InputError(f"-pfault_restart {path}: no such run directory")
+
+
+def _check_iterative_faults(fault_settings: list) -> None:
+    """The Schur fieldsplit eliminates each face's multipliers through the 3x3 blocks the traction-jump
+    stabilisation gives a stuck face (every rank reads the same settings, so every rank raises)."""
+    if PETSc.Options().getString("pc_type", "") != "fieldsplit":
+        return
+    for f in fault_settings:
+        if f.method == "lagrange" and not f.stabilization:
+            raise InputError(f"-pfault_fault_{f.name}_stabilization false: the fieldsplit solver eliminates the "
+                             "multipliers through the stabilisation's face blocks; keep the stabilisation or "
+                             "use -pfault_solver mumps")
+
+
+def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
+    """The scene's settings (every rank) and the serial mesh (rank 0; None elsewhere)."""
+    s = scn.read_settings(reader, options_file)
+    restart_dir = reader.get("pfault_restart")
+    figures = reader.get("pfault_figures")
+    if restart_dir:
+        run_on_root(comm, _check_restart_dir, restart_dir)
+        if not reader.has("pfault_output_dir"):
+            # a restarted run continues in the directory of the run it continues
+            s = dataclasses.replace(s, output_dir=restart_dir)
+    run_on_root(comm, checks.probe_output_dir, s.output_dir)
+    from .solver.setup import apply_solver_file
+    solver_file = apply_solver_file(reader.get("pfault_solver"), options_file)
+    build_serial = scn.generator_options(reader, s, index_bytes=np.dtype(PETSc.IntType).itemsize)
+    serial = run_on_root(comm, build_serial)
+    names = comm.tompi4py().bcast((serial.material_names, sorted(serial.surfaces)) if comm.rank == 0 else None)
+    material_names, surface_names = names
+    scn.check_ground_surface(reader, s, surface_names)
+    materials = scn.read_materials(reader, material_names)
+    drawdown = scn.read_drawdown(reader, material_names, s.water_density, s.gravity)
+    flow_settings = None
+    if reader.get("pfault_flow"):
+        from .solver.flow import read_flow_settings
+        if drawdown.active:
+            raise InputError("-pfault_flow: the pore pressure comes from the flow model; remove the "
+                             "per-material head_drawdown/pressure_change tables")
+        flow_settings = read_flow_settings(reader, material_names, materials, surface_names, s.water_density,
+                                           s.gravity)
+    fault_settings = scn.read_faults(reader, surface_names)
+    fault_names = [f.name for f in fault_settings]
+    boundaries = scn.read_boundaries(reader, surface_names, exclude=fault_names)
+    contact = scn.read_contact_options(reader) if fault_names else None
+    reader.check_pfault_options()
+    effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries)
+    scene = Scene(s, restart_dir, figures, solver_file, material_names, surface_names,
+                  materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects)
+    return scene, serial
+
+
+def _serial_arrays(scene: Scene, serial: Any) -> tuple:
+    """Rank 0: the boundary arrays of the serial mesh, its fault split and the faults' topology."""
+    s = scene.settings
+    out = scn.boundary_arrays(serial, scene.boundaries, s.ground_surface)
+    checks.check_held(serial.points, out[0], [b.name for b in scene.boundaries])
+    if scene.flow_settings is not None:
+        from .solver.flow import FIXED_HEAD_BIT, fixed_head_vertices
+        out[0][:] |= FIXED_HEAD_BIT * fixed_head_vertices(serial, scene.flow_settings.fixed_head_surfaces)
+    split = topology = None
+    fault_names = [f.name for f in scene.fault_settings]
+    if fault_names:
+        from .faults.interface import fault_topology
+        from .mesh.fault import split_faults
+        split = split_faults(serial, fault_names)
+        topology = fault_topology(serial, split, scene.materials)
+    written = 1 + s.time_steps // s.output_every + (s.time_steps % s.output_every > 0)
+    checks.check_output_space(s.output_dir, checks.output_bytes(
+        len(serial.points) + (len(split.split_vertices) if split else 0), len(serial.tets),
+        len(split.faces) if split else 0, written, flow=scene.flow_settings is not None))
+    return out, split, topology
+
+
+def _source(scene: Scene, mesh: Any) -> Any:
+    """The pore-pressure source: the flow model, or the per-material tables."""
+    if scene.flow_settings is None:
+        return TableSource(scene.drawdown, mesh.cell_material)
+    from .solver.flow import FIXED_HEAD_BIT, GroundwaterFlow
+    fs, mat, s = scene.flow_settings, mesh.cell_material, scene.settings
+    return FlowSource(GroundwaterFlow(mesh, fs.conductivity[mat], fs.storage[mat], wells=fs.wells,
+                                      fixed_head=(mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0,
+                                      substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity))
+
+
+def _dofmap(scene: Scene, mesh: Any, fault_id: Any) -> Any:
+    if not scene.fault_settings:
+        return fields.build(mesh)
+    lm_faces = None
+    if any(f.method == "lagrange" for f in scene.fault_settings):
+        fid = mesh.cell_fault_face
+        is_lag = np.array([f.method == "lagrange" for f in scene.fault_settings])
+        lm_faces = ((fid >= 0) & is_lag[np.where(fid >= 0, fault_id[np.maximum(fid, 0)], 0)]).sum(axis=1)
+    return fields.build(mesh, vert_sides=mesh.vert_sides, cell_side=mesh.cell_side, cell_multipliers=lm_faces)
+
+
+def build_model(comm: Any, reader: Any, options_file: str) -> Model:
+    """The model of the scene in ``options_file`` (with the command line's options, through ``reader``)."""
+    t0 = time.perf_counter()
+    stage = PETSc.Log.Stage("Mesh")
+    stage.push()
+    scene, serial = read_scene(comm, reader, options_file)
+    PETSc.Sys.Print("pfault:", scene.effects.line())
+    arr = run_on_root(comm, _serial_arrays, scene, serial)
+    (mask, face_tag, ground), split, topology = arr if arr is not None else ((None, None, None), None, None)
+    mesh = distributed.build(comm, serial, cell_face_tag=face_tag, vert_constraint=mask, vert_ground=ground,
+                             split=split)
+    if scene.fault_settings:
+        topology = comm.tompi4py().bcast(topology if comm.rank == 0 else None)
+    stage.pop()
+    wall = {"mesh": time.perf_counter() - t0}
+
+    t0 = time.perf_counter()
+    stage = PETSc.Log.Stage("Setup")
+    stage.push()
+    fault_id = topology.fault_id if topology is not None else None
+    dofmap = _dofmap(scene, mesh, fault_id)
+    source = None
+    try:
+        assembler = ElasticAssembler(mesh, dofmap, scene.materials)
+        source = _source(scene, mesh)
+        faults = None
+        if scene.effects.faults:
+            from .faults.interface import FaultInterface
+            _check_iterative_faults(scene.fault_settings)
+            with logged("pfaultFaultSetup"):
+                faults = FaultInterface(mesh, dofmap, scene.fault_settings, topology, scene.materials,
+                                        constrained_local(mesh, dofmap), mesh.dm.getLGMap(), scene.contact)
+        equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, faults,
+                              scene.contact)
+    except BaseException:
+        # destroyed here, on every rank at once (the error is every rank's): left to the garbage collector,
+        # which may free them on some ranks only, PETSc 3.18's PetscFinalize waits for ever
+        if source is not None:
+            source.destroy()
+        dofmap.section.destroy()
+        if mesh.migration is not None:
+            mesh.migration.destroy()
+        mesh.dm.destroy()
+        raise
+    stage.pop()
+    wall["setup"] = time.perf_counter() - t0
+    return Model(comm, scene, serial, split, mesh, dofmap, assembler, fault_id, faults, source, equations, wall)

@@ -1,0 +1,57 @@
+"""The two PETSc calls pfault needs that petsc4py 3.18 (Debian 12) does not bind, reached through ctypes here and
+nowhere else. Each is used through petsc4py when the installed version has it.
+
+- ``PetscOptionsLeftGet``: the options no PETSc object has read, which ``-options_left`` prints at the end of a
+  run; pfault rejects them after the first solve, so that a misspelled solver option is an error, not a silent
+  default (petsc4py has no binding in any version).
+- ``SNESSetLagPreconditioner``: keeps a direct solver's factors across Newton iterations
+  (``pfault.solver.policy.FactorReuse``; petsc4py binds it from 3.19 on).
+"""
+
+from __future__ import annotations
+
+import ctypes
+from typing import Any
+
+_LIBPETSC: Any = None
+
+
+def _library() -> Any:
+    """The already loaded libpetsc shared object (Debian's or a pip build), or None."""
+    global _LIBPETSC
+    if _LIBPETSC is None:
+        with open("/proc/self/maps") as fh:
+            for line in fh:
+                path = line.split()[-1]
+                if "libpetsc" in path and ".so" in path:
+                    _LIBPETSC = ctypes.CDLL(path)
+                    break
+    return _LIBPETSC
+
+
+def options_left(PETSc: Any) -> list[str]:
+    """Names of the options in PETSc's database that no object has read (as -options_left reports them)."""
+    lib = _library()
+    if lib is None:
+        return []
+    int_t = ctypes.c_int64 if PETSc.IntType().itemsize == 8 else ctypes.c_int32
+    n = int_t(0)
+    names = ctypes.POINTER(ctypes.c_char_p)()
+    values = ctypes.POINTER(ctypes.c_char_p)()
+    if lib.PetscOptionsLeftGet(None, ctypes.byref(n), ctypes.byref(names), ctypes.byref(values)) != 0:
+        return []
+    left = [names[i].decode() for i in range(n.value)]
+    lib.PetscOptionsLeftRestore(None, ctypes.byref(n), ctypes.byref(names), ctypes.byref(values))
+    return left
+
+
+def set_lag_preconditioner(snes: Any, lag: int) -> None:
+    """SNESSetLagPreconditioner(snes, lag): -1 keeps the preconditioner, -2 rebuilds it once, then keeps it."""
+    if hasattr(snes, "setLagPreconditioner"):
+        snes.setLagPreconditioner(lag)
+        return
+    lib = _library()
+    lib.SNESSetLagPreconditioner.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    err = lib.SNESSetLagPreconditioner(ctypes.c_void_p(snes.handle), lag)
+    if err:
+        raise RuntimeError(f"SNESSetLagPreconditioner returned {err}")

@@ -1,0 +1,115 @@
+"""Pore-pressure sources: where a scene's pore-pressure change comes from.
+
+A source is a part the model is given. The time loop moves it with ``advance_to(t)`` before each step; the
+equations and the output read it with ``cell_dp(t)``, which changes nothing. Every source has:
+
+- ``active``: whether it changes the pore pressure at all (an inactive source loads nothing);
+- ``advance_to(t)``: bring the source to time t (a flow model solves up to t; a table has nothing to do);
+- ``cell_dp(t)``: the pore-pressure change per local cell (Pa) at a time t between the time the source was
+  last advanced from and the time it was advanced to (a step cut into sub-steps reads it within the step:
+  a flow model's field is interpolated linearly in time there);
+- ``step_record()``: figures of the last advance for the step's record (empty for a table);
+- ``has_state``; ``checkpoint()`` / ``restore(...)``: its state, for a restart (a flow model's; a table has none);
+- ``destroy()``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from mpi4py import MPI
+
+
+class TableSource:
+    """dp(t) uniform within each material, from per-material tables (pfault.physics.loading.MaterialDrawdown)."""
+
+    has_state = False       # nothing to checkpoint
+
+    def __init__(self, drawdown: Any, cell_material: np.ndarray) -> None:
+        self.drawdown = drawdown
+        self.cell_material = cell_material
+
+    @property
+    def active(self) -> bool:
+        return self.drawdown.active
+
+    def advance_to(self, t: float) -> None:
+        """A table is known at every time: nothing to do."""
+
+    def cell_dp(self, t: float) -> np.ndarray:
+        return self.drawdown.cell_values(t, self.cell_material)
+
+    def step_record(self) -> dict:
+        return {}
+
+    def vertex_head(self) -> None:
+        """No head field: the tables give the pressure change directly."""
+        return None
+
+    def destroy(self) -> None:
+        pass
+
+
+class FlowSource:
+    """The pore-pressure change of pfault's groundwater-flow model (pfault.solver.flow.GroundwaterFlow):
+    dp = rho_w g h, h the cell average of the P1 head change. ``advance_to`` solves the flow up to t; within the
+    interval of the last advance ``cell_dp`` interpolates linearly in time between the fields at its ends."""
+
+    has_state = True        # its head, time and records are checkpointed
+
+    def __init__(self, flow: Any) -> None:
+        self.flow = flow
+        self._before: tuple[float, np.ndarray] | None = None     # (time, dp) before the last advance
+
+    @property
+    def active(self) -> bool:
+        return self.flow.active
+
+    @property
+    def time(self) -> float:
+        return self.flow.time
+
+    def _current(self) -> np.ndarray:
+        return self.flow.cell_dp()
+
+    def advance_to(self, t: float) -> None:
+        tol = 1e-12 * max(abs(t), abs(self.flow.time), 1.0)
+        if t <= self.flow.time + tol:
+            return
+        self._before = (self.flow.time, self._current())
+        self.flow.advance_to(t)
+
+    def cell_dp(self, t: float) -> np.ndarray:
+        now = self.flow.time
+        if self._before is not None and self._before[0] < t < now:
+            t0, dp0 = self._before
+            theta = (t - t0) / (now - t0)
+            return (1.0 - theta) * dp0 + theta * self._current()
+        tol = 1e-12 * max(abs(t), abs(now), 1.0)
+        if abs(t - now) > tol:
+            raise ValueError(f"groundwater flow is at t = {now:g} s; its pore pressure at {t:g} s is not known")
+        return self._current()
+
+    def step_record(self) -> dict:
+        """The flow's Krylov iterations in its last step and the largest drawdown (m) now (collective)."""
+        if not self.flow.history:
+            return {}
+        h = self.flow.vertex_head()
+        mpi = self.flow.comm.tompi4py()
+        return {"flow_ksp_its": int(self.flow.history[-1].get("ksp_its", 0)),
+                "max_drawdown_m": mpi.allreduce(float(np.max(-h, initial=0.0)), op=MPI.MAX)}
+
+    def vertex_head(self) -> np.ndarray:
+        return self.flow.vertex_head()
+
+    def checkpoint(self) -> tuple[np.ndarray, float, list]:
+        """(head per local vertex (m), the flow's time (s), its step records)."""
+        return self.flow.vertex_head(), float(self.flow.time), list(self.flow.history)
+
+    def restore(self, head: np.ndarray, time: float, history: list) -> None:
+        self.flow.restore(head, time, history)
+        self._before = None
+
+    def destroy(self) -> None:
+        self.flow.destroy()

@@ -1,0 +1,45 @@
+"""The state of a run: everything that changes from one step to the next.
+
+The model (pfault.model) is built once and does not change during the run. What does is held here: the
+solution (displacements and fault multipliers), the initial state it is measured from, the state converged
+before it (the predictor's history), the time, the geostatic initial stress, and the histories of the parts
+that have one (each fault face's initial traction, pore pressure and start of step: ``faults``; the flow
+model's head: the pore-pressure source's ``checkpoint()``). The checkpoint (pfault.io.checkpoint) writes it and
+a restart reads it; the time loop hands it to the observers read-only.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+class State:
+    """``u`` (the solution at ``time``), ``u_ref`` (the state at t = 0, after a geostatic initial state), the
+    state converged before ``u`` (``previous``: (time, Vec) or None), ``sigma0`` (cells x 3 x 3, Pa, or None),
+    and ``faults`` (the fault interface whose per-face history it carries, or None) and ``source`` (the
+    pore-pressure source, whose state a flow model carries)."""
+
+    def __init__(self, u: Any, faults: Any = None, source: Any = None) -> None:
+        self.u = u
+        self.u.setName("displacement")
+        self.u_ref = u.duplicate()
+        self.previous: tuple[float, Any] | None = None
+        self.time = 0.0
+        self.sigma0: np.ndarray | None = None
+        self.faults = faults
+        self.source = source
+
+    def set_previous(self, t: float, u: Any) -> None:
+        """Record the state u converged at time t before the current one (the predictor's history)."""
+        if self.previous is not None:
+            self.previous[1].destroy()
+        self.previous = (float(t), u.copy())
+
+    def destroy(self) -> None:
+        self.u.destroy()
+        self.u_ref.destroy()
+        if self.previous is not None:
+            self.previous[1].destroy()
+            self.previous = None
