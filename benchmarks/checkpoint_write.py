@@ -49,8 +49,8 @@ faults = sim.model.faults
 ways = {"gathered": False}
 if parallel.available(comm):
     ways["parallel"] = True
-writers = {name: checkpoint.Writer(comm, sim.model.mesh, faces=None if faults is None else faults.face,
-                                   n_faces=0 if faults is None else faults.nf_total, parallel_io=p)
+writers = {name: checkpoint.Writer(comm, sim.model.mesh, faces=None if faults is None else faults.faces.face,
+                                   n_faces=0 if faults is None else faults.faces.nf_total, parallel_io=p)
            for name, p in ways.items()}
 times = {name: [] for name in ways}
 for _ in range(repeat):

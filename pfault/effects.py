@@ -74,7 +74,7 @@ class Effects:
 def decide(settings, materials, drawdown, flow, faults, boundaries):
     """Effects of a scene from its settings: the material names, the drawdown tables, whether the flow model is
     on, the fault settings and the boundary conditions."""
-    tables = tuple(m.name for m, tab in zip(materials, getattr(drawdown, "tables", ())) if tab is not None)
+    tables = tuple(m.name for m, tab in zip(materials, drawdown.tables) if tab is not None)
     return Effects(faults=tuple((f.name, f.method) for f in faults), flow=bool(flow), pressure_tables=tables,
                    geostatic=bool(settings.geostatic),
                    tractions=tuple(b.name for b in boundaries

@@ -204,11 +204,13 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
         source = _source(scene, mesh)
         faults = None
         if scene.effects.faults:
+            from .faults.faces import FaultFaces
             from .faults.interface import FaultInterface
             _check_iterative_faults(scene.fault_settings)
             with logged("pfaultFaultSetup"):
-                faults = FaultInterface(mesh, dofmap, scene.fault_settings, topology, scene.materials,
-                                        constrained_local(mesh, dofmap), mesh.dm.getLGMap(), scene.contact)
+                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, scene.materials,
+                                   constrained_local(mesh, dofmap), mesh.dm.getLGMap())
+                faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact)
         equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, faults,
                               scene.contact)
     except BaseException:

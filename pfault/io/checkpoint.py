@@ -98,7 +98,7 @@ def local_state(model, state, step, t, records):
         local = u_local if vec is state.u else eq.local_array(vec)
         data[f"{name}/vertex"] = (VERTEX, _take(local, vdofs))
         if f is not None:
-            data[f"{name}/face"] = (FACE, _take(local, f.lm_dofs))
+            data[f"{name}/face"] = (FACE, _take(local, f.faces.lm_dofs))
     if state.sigma0 is not None:
         data["sigma0"] = (CELL, np.asarray(state.sigma0, dtype=float).reshape(-1, 9))
     if f is not None:
@@ -302,8 +302,8 @@ def restore(ckpt, attrs, model, state):
         v = ckpt[f"{name}/vertex"][mesh.vert_serial]
         local[vdofs[vdofs >= 0]] = v[vdofs >= 0]
         if f is not None:
-            lm = f.lm_dofs
-            local[lm[lm >= 0]] = ckpt[f"{name}/face"][f.face][lm >= 0]
+            lm = f.faces.lm_dofs
+            local[lm[lm >= 0]] = ckpt[f"{name}/face"][f.faces.face][lm >= 0]
         eq.to_global(local, PETSc.InsertMode.INSERT_VALUES, out=out)
 
     vec("u", state.u)
@@ -317,9 +317,9 @@ def restore(ckpt, attrs, model, state):
     if "sigma0" in ckpt:
         state.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
     if f is not None:
-        f.t0 = ckpt["faults/t0"][f.face].copy()
-        f.set_pore_pressure(ckpt["faults/pn"][f.face])
-        f.start_from(eq.local_array(state.u), ckpt["faults/traction"][f.face])
+        f.t0 = ckpt["faults/t0"][f.faces.face].copy()
+        f.set_pore_pressure(ckpt["faults/pn"][f.faces.face])
+        f.start_from(eq.local_array(state.u), ckpt["faults/traction"][f.faces.face])
     flow = _flow(state)
     if flow is not None:
         flow.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],

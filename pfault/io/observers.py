@@ -95,7 +95,7 @@ class RunOutput:
         m = self.model
         parallel = par.available(self.comm)
         self.fields = self.step_output(self.writer, parallel)
-        faces = None if m.faults is None else m.faults.face
+        faces = None if m.faults is None else m.faults.faces.face
         self.checkpoint = checkpoint.Writer(self.comm, m.mesh, faces=faces,
                                             n_faces=0 if m.faults is None else len(m.fault_id),
                                             parallel_io=parallel)
@@ -110,7 +110,7 @@ class RunOutput:
         mpi = self.comm.tompi4py()
         split = mpi.bcast(m.split.split_vertices if self.comm.rank == 0 and m.split is not None else None)
         return StepOutput(self.comm, m.mesh, writer, np.zeros(0, np.int64) if split is None else split,
-                          faces=None if m.faults is None else m.faults.face,
+                          faces=None if m.faults is None else m.faults.faces.face,
                           fault_id=None if m.faults is None else m.fault_id,
                           surface=self.surface if self.comm.rank == 0 else None, parallel=parallel)
 
@@ -160,7 +160,7 @@ class RunOutput:
         eq, dofmap = m.equations, m.dofmap
         both = np.concatenate([u_rel[dofmap.vertex_dofs(0)], u_rel[dofmap.vertex_dofs(1)]], axis=1)
         u_total = eq.local_array(state.u_ref if initial else state.u)
-        dp = eq.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
+        dp = eq.loads.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
         sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
         faults = _fault_fields(m.faults, u_total, u_rel) if m.faults is not None else None
         head = m.source.vertex_head()
@@ -241,9 +241,9 @@ class RunOutput:
 def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray) -> dict:
     """Per fault face this rank owns: tractions from the total state, jumps relative to the initial state."""
     t_loc, _, t_glob, _, state = fs.face_fields(u_total)
-    g, gl = fs.jumps(u_rel)
-    return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.normal,
-            "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.normal,
+    g, gl = fs.faces.jumps(u_rel)
+    return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.faces.normal,
+            "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.faces.normal,
             "slip_magnitude": np.linalg.norm(gl[:, 1:], axis=1), "state": np.asarray(state, dtype=np.int64),
             "traction_normal_effective": fs.effective(t_loc)[:, 0]}
 

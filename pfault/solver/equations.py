@@ -16,8 +16,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ..effects import logged
 from ..faults import contact as ct
+from .loads import Loads
 from .setup import rigid_body_modes
 
 
@@ -35,16 +35,15 @@ def constrained_local(mesh: Any, dofmap: Any) -> np.ndarray:
 
 class Equations:
     """Linear elastic skeleton loaded by the pore-pressure change of ``source``, gravity/prestress and
-    tractions, with the interface terms of ``faults`` (or None). ``f`` holds the load of the time last set
-    (``set_load``); ``J`` the Jacobian last assembled."""
+    tractions (``loads``, a pfault.solver.loads.Loads), with the interface terms of ``faults`` (or None). ``J``
+    holds the Jacobian last assembled."""
 
     def __init__(self, mesh: Any, dofmap: Any, assembler: Any, boundaries: list, source: Any, settings: Any,
                  faults: Any = None, contact: Any = None) -> None:
         self.mesh, self.dofmap, self.asm = mesh, dofmap, assembler
         self.dm = mesh.dm
         self.comm = self.dm.getComm()
-        self.boundaries, self.source, self.settings = boundaries, source, settings
-        self.faults, self.contact = faults, contact
+        self.settings, self.faults = settings, faults
         self._log_residual = PETSc.Log.Event("pfaultResidual")
         self._log_jacobian = PETSc.Log.Event("pfaultJacobian")
         log_assembly = PETSc.Log.Event("pfaultAssembleK")
@@ -53,8 +52,8 @@ class Equations:
         t0 = time.perf_counter()
         self.K = self._build_operator()
         self.bc_rows = self._constrained_rows()
-        with logged("pfaultDisplacementLoad"):
-            self.lifts = self._prescribed_displacements()
+        # the lifts of prescribed displacements take K before its constrained rows and columns are zeroed
+        self.loads = Loads(self, boundaries, source, settings, contact)
         self.K.zeroRowsColumns(self.bc_rows, diag=1.0)
         self.assembly_wall = time.perf_counter() - t0
         log_assembly.end()
@@ -65,20 +64,9 @@ class Equations:
             self.J = self.K.duplicate(copy=True)
             self.J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
             self.J.setNearNullSpace(self.nullspace)
-        self.f = self.dm.createGlobalVec()
-        self.static_local = np.zeros(dofmap.n_local)     # loads that do not change in time (tests' body forces)
         self.n_jacobians = 0            # interface Jacobians assembled (a configuration seen before is kept)
         self._jacobian_key = None       # faces' states of the assembled J while it depends on nothing else
         self._states = None             # faces' states imposed on residual and Jacobian (fixed_states)
-        self._gravity_norm: float | None = None
-        self.surface_loads = []         # boundary loads per surface, scaled by the surface's history
-        with logged("pfaultTractionLoad"):
-            for i, b in enumerate(boundaries):
-                if b.kind in ("traction", "displacement") and any(b.traction):
-                    loc = np.zeros(dofmap.n_local)
-                    tr = [bb.traction if j == i else (0.0, 0.0, 0.0) for j, bb in enumerate(boundaries)]
-                    assembler.traction_load(tr, loc)
-                    self.surface_loads.append((b, loc))
 
     def _build_operator(self) -> Any:
         # Filled as BAIJ (every point carries 3k dofs, so the DM's local-to-global map has block size 3): a cell
@@ -93,7 +81,7 @@ class Equations:
         Kb.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         self.asm.add_stiffness(Kb, blocked=Kb.getLGMap()[0].getBlockSize() == 3)
         if self.faults is not None:
-            self.faults.insert_pattern(Kb)
+            self.faults.faces.insert_pattern(Kb)
         Kb.assemble()
         lgmap = Kb.getLGMap()
         K = Kb.convert(PETSc.Mat.Type.AIJ)      # in place; the conversion drops the local-to-global map
@@ -118,28 +106,6 @@ class Equations:
         self.bc_local_owned = rows - start
         return rows
 
-    def _prescribed_displacements(self) -> list:
-        """For each displacement boundary: (boundary, g on its constrained dofs, lift = -K g) as global Vecs."""
-        out = []
-        which = self.mesh.vert_displacement_bc
-        mask = self.mesh.vert_data[:, 0]
-        for i, b in enumerate(self.boundaries):
-            if b.kind != "displacement" or not any(b.displacement):
-                continue
-            loc = np.zeros(self.dofmap.n_local)
-            for side in (0, 1):
-                sel = (self.dofmap.vert_sides > side) & (which == i)
-                dofs = self.dofmap.vertex_dofs(side)[sel]
-                bits = ((mask[sel, None] >> np.arange(3)) & 1) * ((b.components >> np.arange(3)) & 1)
-                vals = np.broadcast_to(np.asarray(b.displacement), dofs.shape)
-                loc[dofs[bits == 1]] = vals[bits == 1]
-            g = self.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
-            lift = g.duplicate()
-            self.K.mult(g, lift)
-            lift.scale(-1.0)
-            out.append((b, g, lift))
-        return out
-
     # -- vectors -------------------------------------------------------------------------------
     def create_vec(self) -> Any:
         return self.dm.createGlobalVec()
@@ -163,70 +129,6 @@ class Equations:
         self.dm.restoreLocalVec(lv)
         return a
 
-    # -- loads ---------------------------------------------------------------------------------
-    def cell_dp(self, t: float) -> np.ndarray:
-        """Pore-pressure change per local cell at time t (Pa; the source's, zero where it is inactive)."""
-        if not self.source.active:
-            return np.zeros(len(self.mesh.cells))
-        return self.source.cell_dp(t)
-
-    def set_load(self, t: float) -> None:
-        """The load f(t) and, with faults, the pore pressure their laws see at t."""
-        loc = self.static_local.copy()
-        for b, fl in self.surface_loads:
-            loc += b.scale(t) * fl
-        if self.source.active:
-            with logged("pfaultPorePressureLoad"):
-                self.asm.pore_pressure_load(self.source.cell_dp(t), loc)
-        self.to_global(loc, out=self.f)
-        for b, g, lift in self.lifts:
-            self.f.axpy(b.scale(t), lift)
-        arr = self.f.getArray()
-        arr[self.bc_local_owned] = 0.0
-        for b, g, lift in self.lifts:
-            arr[self.bc_local_owned] += b.scale(t) * g.getArray()[self.bc_local_owned]
-        if self.faults is not None:
-            self.faults.set_pore_pressure(self.face_pore_pressure(t))
-
-    def face_pore_pressure(self, t: float) -> np.ndarray:
-        """alpha p at the owned fault faces (Pa): the hydrostatic pressure below the water table at the face
-        centroid when the scene starts from the geostatic state, plus the change at time t (minus cell).
-
-        In a geostatic scene p is the absolute pressure, and it is clamped at zero unless
-        ``-pfault_contact_suction``: a fault face above the lowered water table is dry. Without the geostatic
-        state p is only the change from an unknown initial pressure, and it is used as it is."""
-        f = self.faults
-        if not self.contact.effective_stress or not f.nf:
-            return np.zeros(f.nf)
-        s = self.settings
-        p = np.zeros(f.nf)
-        if s.geostatic:
-            z = self.mesh.coords[f.verts][:, :, 2].mean(axis=1)
-            p += s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
-        if self.source.active and t > 0:
-            p += self.source.cell_dp(t)[f.cell]
-        if s.geostatic and not self.contact.suction:
-            p = np.maximum(p, 0.0)
-        return self.asm.alpha[f.cell] * p
-
-    def gravity_load(self, out: Any) -> None:
-        """The gravity load vector (zero on constrained dofs) into ``out``."""
-        grav = np.zeros(self.dofmap.n_local)
-        self.asm.gravity_load(self.settings.gravity, grav)
-        self.to_global(grav, out=out)
-        out.getArray()[self.bc_local_owned] = 0.0
-
-    def gravity_load_norm(self) -> float:
-        """|gravity load| of a geostatic scene (0 otherwise), computed once."""
-        if self._gravity_norm is None:
-            self._gravity_norm = 0.0
-            if self.settings.geostatic:
-                g = self.create_vec()
-                self.gravity_load(g)
-                self._gravity_norm = g.norm()
-                g.destroy()
-        return self._gravity_norm
-
     # -- geostatic initial state ---------------------------------------------------------------
     def glued_operator(self) -> Any:
         """The operator of the elastic gravity solve: K, with every fault face glued (no jump) while it forms."""
@@ -237,9 +139,9 @@ class Equations:
         self.faults.add_glued(A)
         A.assemble()
         self._jacobian_key = None
-        if not self.faults.jacobian_varies(np.full(self.faults.nf, ct.STICK)):
+        if not self.faults.jacobian_varies(np.full(self.faults.faces.nf, ct.STICK)):
             # the Jacobian of every face stuck: a first step that starts so keeps this factorisation
-            self._jacobian_key = np.full(self.faults.nf, ct.STICK)
+            self._jacobian_key = np.full(self.faults.faces.nf, ct.STICK)
         return A
 
     def geostatic_stress(self, u_gravity_local: np.ndarray) -> np.ndarray:
@@ -262,7 +164,7 @@ class Equations:
         return sigma0
 
     def cell_total_stress(self, u_local: np.ndarray, dp: np.ndarray, sigma0: np.ndarray | None) -> np.ndarray:
-        """Total stress per cell: initial + C:eps(u) - alpha dp I (dp per cell, Pa)."""
+        """Total stress per cell: initial + C:eps(u) - alpha dp I (dp per cell, Pa; ``Loads.cell_dp``)."""
         sig = self.asm.effective_stress(u_local)
         if sigma0 is not None:
             sig = sig + sigma0
@@ -283,7 +185,7 @@ class Equations:
         """F(x) (an SNES function callback)."""
         self._log_residual.begin()
         self.K.mult(x, F)
-        F.axpy(-1.0, self.f)
+        F.axpy(-1.0, self.loads.f)
         if self.faults is not None:
             out = np.zeros(self.dofmap.n_local)
             self.faults.residual(self.local_array(x), out, self._states)
@@ -317,11 +219,9 @@ class Equations:
         return state
 
     def destroy(self) -> None:
-        for obj in {id(o): o for o in (self.K, self.J, self.f, self.nullspace)}.values():
+        self.loads.destroy()
+        for obj in {id(o): o for o in (self.K, self.J, self.nullspace)}.values():
             obj.destroy()
-        for _, g, lift in self.lifts:
-            g.destroy()
-            lift.destroy()
 
 
 def _extend_pattern(K0: Any, rows: np.ndarray, cols: np.ndarray, bs: int = 1) -> Any:

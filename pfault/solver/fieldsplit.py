@@ -34,11 +34,11 @@ class FieldSplit:
         if pc.getType() != PETSc.PC.Type.FIELDSPLIT:
             return
         f = equations.faults
-        if f is None or not f.has_lagrange:
+        if f is None or not f.faces.has_lagrange:
             _displacement_only(pc)
             return
         loc = np.zeros(equations.dofmap.n_local)
-        loc[f.lm_dofs[np.nonzero(f.lagrange)[0]].ravel()] = 1.0
+        loc[f.faces.lm_dofs[np.nonzero(f.faces.lagrange)[0]].ravel()] = 1.0
         g = equations.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
         start, _ = g.getOwnershipRange()
         mark = g.getArray() > 0.5

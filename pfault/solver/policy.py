@@ -201,13 +201,13 @@ class StepSolver:
         plus the changes; the faults' tractions start from it."""
         eq, state, faults = self.eq, self.state, self.faults
         if faults is not None:
-            faults.set_pore_pressure(eq.face_pore_pressure(0.0))
-        eq.gravity_load(eq.f)
+            faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
+        eq.loads.gravity(eq.loads.f)
         ug = state.u.duplicate()
         ksp = self.snes.getKSP()
         A = eq.glued_operator()
         ksp.setOperators(A, A)
-        ksp.solve(eq.f, ug)
+        ksp.solve(eq.loads.f, ug)
         reason = ksp.getConvergedReason()
         norm = ug.norm()
         if reason <= 0 or not np.isfinite(norm):
@@ -221,11 +221,11 @@ class StepSolver:
         ug.destroy()
         state.u.set(0.0)
         if faults is not None:
-            faults.set_pore_pressure(eq.face_pore_pressure(0.0))
+            faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
             faults.t0 = faults.initial_tractions(state.sigma0)
             loc = eq.local_array(state.u)
-            lag = np.nonzero(faults.lagrange)[0]
-            loc[faults.lm_dofs[lag]] = faults.t0[lag]
+            lag = np.nonzero(faults.faces.lagrange)[0]
+            loc[faults.faces.lm_dofs[lag]] = faults.t0[lag]
             eq.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=state.u)
             faults.start_from(loc, faults.t0)     # penalty faces too: their shear starts from the initial one
 
@@ -242,7 +242,7 @@ class StepSolver:
         if faults is not None:
             faults.begin_step(eq.local_array(state.u))     # under the pore pressure it was solved for
             start = state.u.copy()
-        eq.set_load(t)
+        eq.loads.set(t)
         if faults is not None:
             self.load_tolerance()
             trial = self.predict(t)
@@ -349,7 +349,7 @@ class StepSolver:
         eq, snes = self.eq, self.snes
         if not self._atol_user:
             eq.K.mult(self.state.u, self.F)     # F as scratch: the predictor and SNES evaluate the residual next
-            scale = max(eq.f.norm(), self.F.norm(), eq.gravity_load_norm())
+            scale = max(eq.loads.f.norm(), self.F.norm(), eq.loads.gravity_norm())
             rtol, _, stol, max_it = snes.getTolerances()
             snes.setTolerances(rtol=rtol, atol=max(rtol * scale, 1e-300), stol=stol, max_it=max_it)
         ksp = snes.getKSP()

@@ -22,10 +22,10 @@ from pfault.simulation import Simulation  # noqa: E402
 sim = Simulation(SCENE, sys.argv)
 sim.setup()
 faults = sim.model.faults
-counts = [int(c) for c in faults.mpi.allgather(faults.nf)]
+counts = [int(c) for c in faults.faces.mpi.allgather(faults.faces.nf)]
 mesh = sim.model.mesh
-owned = faults.mpi.gather(mesh.cell_serial)      # (no overlap: every local cell is owned)
-out = {"ranks": PETSc.COMM_WORLD.size, "faces_per_rank": counts, "fault_faces": int(faults.nf_total)}
+owned = faults.faces.mpi.gather(mesh.cell_serial)      # (no overlap: every local cell is owned)
+out = {"ranks": PETSc.COMM_WORLD.size, "faces_per_rank": counts, "fault_faces": int(faults.faces.nf_total)}
 if owned is not None:
     cell_ranks = np.zeros(sum(len(ids) for ids in owned), int)
     for r, ids in enumerate(owned):

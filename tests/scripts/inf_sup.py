@@ -26,11 +26,11 @@ f.begin_step(p.local_array(sim.state.u))
 p.assemble_jacobian(sim.state.u, p.J)
 J = p.J.convert("dense").getDenseArray().copy()
 loc = np.zeros(sim.model.dofmap.n_local)
-loc[f.lm_dofs.ravel()] = 1.0
+loc[f.faces.lm_dofs.ravel()] = 1.0
 mark = p.to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray() > 0.5
 # the constraint rows of stuck faces are -c (A g + S dt) (forces); in jump units A g + S dt the saddle point is
 # symmetric, [K B^T; B -S]: divide each row by its -c
-loc[f.lm_dofs] = -np.column_stack([f.law.c_n, f.law.c_t, f.law.c_t])
+loc[f.faces.lm_dofs] = -np.column_stack([f.law.c_n, f.law.c_t, f.law.c_t])
 rowscale = p.to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray()
 J[mark] /= rowscale[mark, None]
 bc = np.zeros(len(mark), bool)
@@ -47,7 +47,7 @@ n_null = int(np.sum(ev < tol))
 w, V = np.linalg.eigh(0.5 * (schur + schur.T))
 # the spurious modes carry no net force: their area-weighted mean per component vanishes (they oscillate)
 modes = V[:, :n_null].T.reshape(n_null, -1, 3)
-area = f.area[None, :, None]
+area = f.faces.area[None, :, None]
 mean = np.abs((modes * area).sum(axis=1)) / area.sum()
 rms = np.sqrt((modes ** 2 * area).sum(axis=1) / area.sum())
 net = float(np.max(mean / np.maximum(rms, 1e-300)))

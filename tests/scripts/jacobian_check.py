@@ -42,9 +42,9 @@ def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noi
     v = sim.state.u.duplicate()
     rstart, rend = x.getOwnershipRange()
     n = rend - rstart
-    lm = (f.g_lm[f.lagrange].ravel() - rstart) if f.nf else np.zeros(0, np.int64)
+    lm = (f.faces.g_lm[f.faces.lagrange].ravel() - rstart) if f.faces.nf else np.zeros(0, np.int64)
     xa = rng.normal(size=n) * u_noise
-    tm = np.asarray(t_mean).reshape(-1, 3)[np.flatnonzero(f.lagrange) if np.ndim(t_mean) > 1 else 0]
+    tm = np.asarray(t_mean).reshape(-1, 3)[np.flatnonzero(f.faces.lagrange) if np.ndim(t_mean) > 1 else 0]
     xa[lm] = (tm + t_noise * rng.normal(size=(len(lm) // 3, 3))).ravel()
     x.setArray(xa)
     # plus-side dofs of every split vertex (owned or ghost, the same value on every rank): add the offset
@@ -92,10 +92,10 @@ def taylor(sim, x, v):
 
 def set_history(f, rng, g_prev, t_prev):
     """Start-of-step jump and traction (local frame) of the owned faces; gathered copy for the stabilisation."""
-    g = np.asarray(g_prev)[None, :] + 1e-4 * rng.normal(size=(f.nf, 3))
-    t = np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.nf, 3))
-    f.t_ref_all = f.gather_faces(t)
-    f.start = StepStart(g, t, np.zeros(f.nf, np.int64))
+    g = np.asarray(g_prev)[None, :] + 1e-4 * rng.normal(size=(f.faces.nf, 3))
+    t = np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.faces.nf, 3))
+    f.t_ref_all = f.faces.gather_faces(t)
+    f.start = StepStart(g, t, np.zeros(f.faces.nf, np.int64))
 
 
 # multipliers (local frame = global here: n = +x) and plus-side jumps that put a face in each branch: stuck
@@ -109,13 +109,13 @@ def lagrange_cases(results):
     sim = Simulation(SCENE, sys.argv)
     sim.setup()
     p, f = sim.model.equations, sim.model.faults
-    p.set_load(1.0)
+    p.loads.set(1.0)
     rng = np.random.default_rng(1234 + COMM.rank)
-    counts = COMM.tompi4py().allgather(f.nf)
+    counts = COMM.tompi4py().allgather(f.faces.nf)
     results["faces_per_rank"] = [int(c) for c in counts]
     # the mixed case: one common jump (no opening, the start's slip) and the branch set by the multiplier alone
     # (open: tensile), by serial face id: the same configuration at any rank count
-    mixed_t = np.array([T_STICK, T_SLIP, (5e6, 1e5, 0.0)])[f.face % 3]
+    mixed_t = np.array([T_STICK, T_SLIP, (5e6, 1e5, 0.0)])[f.faces.face % 3]
     for name, t_mean, offset in (("stick", T_STICK, (0.0, 1e-3, 2e-3)), ("slip", T_SLIP, (0.0, 2e-2, -2e-2)),
                                  ("open", T_OPEN, (2e-1, 0.0, 0.0)), ("slip_start", T_SLIP, (0.0, 1e-3, 2e-3)),
                                  ("mixed", mixed_t, None)):
@@ -134,9 +134,9 @@ def penalty_cases(results):
     sim = Simulation(SCENE, sys.argv)
     sim.setup()
     p, f = sim.model.equations, sim.model.faults
-    p.set_load(1.0)
+    p.loads.set(1.0)
     rng = np.random.default_rng(4321 + COMM.rank)
-    k = float(np.mean(f.penalty_law.c_n)) if f.nf else 0.0
+    k = float(np.mean(f.penalty_law.c_n)) if f.faces.nf else 0.0
     results["penalty_stiffness"] = COMM.tompi4py().allgather(k)
     # t_N = k g_N, tau_L = tan(phi) |t_N|; trial shear = t_T^n + k (g_T - g_T^n)
     for name, offset, g_prev, t_prev in (

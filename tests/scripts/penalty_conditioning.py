@@ -50,9 +50,9 @@ def solve(p, f, x, F, pc):
     smax, smin = ksp.computeExtremeSingularValues()
     # the solution's largest fault jump (stick: the exact answer is zero; penalty: ~ |t| / k)
     dx.axpy(1.0, x)
-    _, gl = f.jumps(p.local_array(dx))
+    _, gl = f.faces.jumps(p.local_array(dx))
     jump = float(np.max(np.linalg.norm(gl, axis=1), initial=0.0))
-    jump = f.mpi.allreduce(jump, op=MPI.MAX)
+    jump = f.faces.mpi.allreduce(jump, op=MPI.MAX)
     ksp.destroy()
     dx.destroy()
     return {"ksp_its": int(its), "reason": int(reason), "converged": bool(reason > 0), "sigma_max": float(smax),
@@ -68,7 +68,7 @@ def one(method, k=None):
     sim = Simulation(SCENE, sys.argv)
     sim.setup()
     p, f, dm = sim.model.equations, sim.model.faults, sim.model.dofmap
-    p.set_load(1.0)
+    p.loads.set(1.0)
     x = sim.state.u.duplicate()
     loc = np.zeros(dm.n_local)
     # a slight interpenetration: every face closed and stuck (Lagrange and penalty)

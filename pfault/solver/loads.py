@@ -1,0 +1,128 @@
+"""The load vector f(t) of the equations: the pore-pressure change of the source (Terzaghi/Biot), boundary
+tractions and prescribed displacements scaled by their histories, loads that do not change in time, and the
+pore pressure the fault laws see; the gravity load of a geostatic initial state."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from petsc4py import PETSc
+
+from ..effects import logged
+
+
+class Loads:
+    """The loads of ``equations`` (pfault.solver.equations.Equations, whose K is not yet constrained: the lifts
+    of prescribed displacements are -K g). ``f`` holds the load of the time last set (``set``);
+    ``static_local`` loads that do not change in time (a local array: body forces of a verification case)."""
+
+    def __init__(self, equations: Any, boundaries: list, source: Any, settings: Any, contact: Any) -> None:
+        eq = self.eq = equations
+        self.source, self.settings, self.contact = source, settings, contact
+        self.mesh, self.dofmap, self.asm = eq.mesh, eq.dofmap, eq.asm
+        self.f = eq.create_vec()
+        self.static_local = np.zeros(eq.dofmap.n_local)
+        self._gravity_norm: float | None = None
+        with logged("pfaultDisplacementLoad"):
+            self.lifts = self._prescribed_displacements(boundaries)
+        self.surface_loads = []         # boundary loads per surface, scaled by the surface's history
+        with logged("pfaultTractionLoad"):
+            for i, b in enumerate(boundaries):
+                if b.kind in ("traction", "displacement") and any(b.traction):
+                    loc = np.zeros(eq.dofmap.n_local)
+                    tr = [bb.traction if j == i else (0.0, 0.0, 0.0) for j, bb in enumerate(boundaries)]
+                    eq.asm.traction_load(tr, loc)
+                    self.surface_loads.append((b, loc))
+
+    def _prescribed_displacements(self, boundaries: list) -> list:
+        """For each displacement boundary: (boundary, g on its constrained dofs, lift = -K g) as global Vecs."""
+        out = []
+        which = self.mesh.vert_displacement_bc
+        mask = self.mesh.vert_data[:, 0]
+        for i, b in enumerate(boundaries):
+            if b.kind != "displacement" or not any(b.displacement):
+                continue
+            loc = np.zeros(self.dofmap.n_local)
+            for side in (0, 1):
+                sel = (self.dofmap.vert_sides > side) & (which == i)
+                dofs = self.dofmap.vertex_dofs(side)[sel]
+                bits = ((mask[sel, None] >> np.arange(3)) & 1) * ((b.components >> np.arange(3)) & 1)
+                vals = np.broadcast_to(np.asarray(b.displacement), dofs.shape)
+                loc[dofs[bits == 1]] = vals[bits == 1]
+            g = self.eq.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
+            lift = g.duplicate()
+            self.eq.K.mult(g, lift)
+            lift.scale(-1.0)
+            out.append((b, g, lift))
+        return out
+
+    def cell_dp(self, t: float) -> np.ndarray:
+        """Pore-pressure change per local cell at time t (Pa; the source's, zero where it is inactive)."""
+        if not self.source.active:
+            return np.zeros(len(self.mesh.cells))
+        return self.source.cell_dp(t)
+
+    def set(self, t: float) -> None:
+        """The load f(t) and, with faults, the pore pressure their laws see at t."""
+        bc = self.eq.bc_local_owned
+        loc = self.static_local.copy()
+        for b, fl in self.surface_loads:
+            loc += b.scale(t) * fl
+        if self.source.active:
+            with logged("pfaultPorePressureLoad"):
+                self.asm.pore_pressure_load(self.source.cell_dp(t), loc)
+        self.eq.to_global(loc, out=self.f)
+        for b, g, lift in self.lifts:
+            self.f.axpy(b.scale(t), lift)
+        arr = self.f.getArray()
+        arr[bc] = 0.0
+        for b, g, lift in self.lifts:
+            arr[bc] += b.scale(t) * g.getArray()[bc]
+        if self.eq.faults is not None:
+            self.eq.faults.set_pore_pressure(self.face_pore_pressure(t))
+
+    def face_pore_pressure(self, t: float) -> np.ndarray:
+        """alpha p at the owned fault faces (Pa): the hydrostatic pressure below the water table at the face
+        centroid when the scene starts from the geostatic state, plus the change at time t (minus cell).
+
+        In a geostatic scene p is the absolute pressure, and it is clamped at zero unless
+        ``-pfault_contact_suction``: a fault face above the lowered water table is dry. Without the geostatic
+        state p is only the change from an unknown initial pressure, and it is used as it is."""
+        f = self.eq.faults
+        if not self.contact.effective_stress or not f.faces.nf:
+            return np.zeros(f.faces.nf)
+        s = self.settings
+        p = np.zeros(f.faces.nf)
+        if s.geostatic:
+            z = self.mesh.coords[f.faces.verts][:, :, 2].mean(axis=1)
+            p += s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
+        if self.source.active and t > 0:
+            p += self.source.cell_dp(t)[f.faces.cell]
+        if s.geostatic and not self.contact.suction:
+            p = np.maximum(p, 0.0)
+        return self.asm.alpha[f.faces.cell] * p
+
+    def gravity(self, out: Any) -> None:
+        """The gravity load vector (zero on constrained dofs) into ``out``."""
+        grav = np.zeros(self.dofmap.n_local)
+        self.asm.gravity_load(self.settings.gravity, grav)
+        self.eq.to_global(grav, out=out)
+        out.getArray()[self.eq.bc_local_owned] = 0.0
+
+    def gravity_norm(self) -> float:
+        """|gravity load| of a geostatic scene (0 otherwise), computed once."""
+        if self._gravity_norm is None:
+            self._gravity_norm = 0.0
+            if self.settings.geostatic:
+                g = self.eq.create_vec()
+                self.gravity(g)
+                self._gravity_norm = g.norm()
+                g.destroy()
+        return self._gravity_norm
+
+    def destroy(self) -> None:
+        self.f.destroy()
+        for _, g, lift in self.lifts:
+            g.destroy()
+            lift.destroy()
