@@ -318,7 +318,13 @@ class StepSolver:
         """Move state.u to the step's elastic trial: the load increment carried with every closed face stuck and
         every open face open (the states the step starts in); returns (|F| before, Krylov iterations). The
         semismooth Newton then starts from a state where the increment has been carried elastically, not from
-        the last one with the new pore pressure's jump in the faces' effective tractions."""
+        the last one with the new pore pressure's jump in the faces' effective tractions.
+
+        A trial whose linear solve fails (a singular Jacobian: part of the body held by nothing but open faces)
+        leaves u where it was: its iterate is whatever the Krylov method reached, and Newton from there could
+        take the faces anywhere (the two blocks started geostatically, every face open: the step converged from
+        a trial stopped after SINGULAR_MAX_IT iterations, or failed, depending on the round-off in that
+        iterate)."""
         eq, u = self.eq, self.state.u
         with eq.fixed_states(self.faults.start.trial()):
             eq.residual(self.snes, u, self.F)
@@ -328,7 +334,8 @@ class StepSolver:
             ksp.setOperators(eq.J, eq.J)
             du = u.duplicate()
             ksp.solve(self.F, du)
-            u.axpy(-1.0, du)
+            if ksp.getConvergedReason() > 0:
+                u.axpy(-1.0, du)
             du.destroy()
             return fnorm, int(ksp.getIterationNumber())
 
