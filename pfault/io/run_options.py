@@ -40,7 +40,7 @@ def _physical_options(options):
             and not any(pattern.match(k.lower()) for pattern, *_ in LOADING)}
 
 
-def read_run_options(run_dir):
+def read_run_options(run_dir: str) -> dict[str, str]:
     """The -pfault_* options of the run in ``run_dir`` (its options.txt), {name: value string}."""
     out = {}
     with open(os.path.join(run_dir, "options.txt")) as fh:
@@ -51,7 +51,8 @@ def read_run_options(run_dir):
     return out
 
 
-def loading_tables(options, water_density, gravity):
+def loading_tables(options: dict[str, str], water_density: float,
+                   gravity: float) -> dict[str, tuple[str, str, str, float, Table]]:
     """The loads a run's loading tables give, from its options ({name: value string}): {what it loads:
     (option, value string, unit, value when not given, Table in SI)}; a head drawdown as the pore-pressure
     change it gives (dp = -rho_w g h), so that the same load given either way is the same."""
@@ -67,7 +68,8 @@ def loading_tables(options, water_density, gravity):
     return out
 
 
-def check_loading(run_dir, theirs, mine, until, water_density, gravity):
+def check_loading(run_dir: str, theirs: dict[str, str], mine: dict[str, str], until: float, water_density: float,
+                  gravity: float) -> None:
     """InputError naming the first loading table whose load on [0, until] (up to the checkpoint's time)
     differs from that of the run in ``run_dir``: the checkpoint is the answer to that run's load up to then,
     so a continued run may change a table (extend it, alter the future load) only after it. ``theirs``,
@@ -90,7 +92,8 @@ def check_loading(run_dir, theirs, mine, until, water_density, gravity):
                          f"that run ({had}) up to it")
 
 
-def check_options(run_dir, options, until, water_density, gravity):
+def check_options(run_dir: str, options: dict[str, str], until: float, water_density: float,
+                  gravity: float) -> None:
     """InputError naming the first physical option (material, fault, boundary condition, mesh, geostatic
     state, flow) that differs from the run in ``run_dir`` or the first loading table that differs from its
     before ``until``, the checkpoint's time: a continued run equals the uninterrupted one only with the same
