@@ -63,7 +63,9 @@ def loading_tables(options: dict[str, str], water_density: float,
             match = pattern.match(name)
             if match:
                 scale = -water_density * gravity if name.endswith("_head_drawdown") else 1.0
-                table = Table.from_pairs(parse_table(text, name, spec_for(name).unit), scale=scale)
+                spec = spec_for(name)
+                assert spec is not None          # every LOADING pattern is a declared option (SPECS)
+                table = Table.from_pairs(parse_table(text, name, spec.unit), scale=scale)
                 out[what.format(*match.groups())] = (name, text, unit, default, table)
     return out
 
@@ -78,7 +80,9 @@ def check_loading(run_dir: str, theirs: dict[str, str], mine: dict[str, str], un
     b = loading_tables(mine, water_density, gravity)
     for what in sorted(set(a) | set(b)):
         old, new = a.get(what), b.get(what)
-        name, _, unit, default, _ = new or old
+        given = new or old
+        assert given is not None                 # ``what`` is a key of a or of b
+        name, _, unit, default, _ = given
         unloaded = Table((0.0,), (default,))
         diff = (new[4] if new else unloaded).first_difference(old[4] if old else unloaded, until)
         if diff is None:
