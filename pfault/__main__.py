@@ -10,12 +10,16 @@ the same file, or twice on the command line, is a warning naming the value used 
 overriding a file is the normal way to change a scene and says nothing).
 """
 
+from __future__ import annotations
+
 import os
 import signal
 import sys
+from collections.abc import Sequence
 
 from pfault.errors import EXIT_INPUT, EXIT_USAGE
-from pfault.optionsfile import COMMAND_LINE, ArgumentError, _entry_or_include, is_option_name, read_options_file
+from pfault.optionsfile import (COMMAND_LINE, ArgumentError, Entry, _entry_or_include, is_option_name,
+                                read_options_file)
 
 USAGE = ("usage: mpirun -n N python -m pfault SCENE.opts [-option value ...]   (python -m pfault -help lists the "
          "options and exit codes)")
@@ -35,7 +39,7 @@ def _say(text):
         sys.stderr.flush()
 
 
-def read_command_line(tokens, scene):
+def read_command_line(tokens: Sequence[str], scene: str | None) -> list[Entry]:
     """Entries of the options after the scene file; a stray argument is a usage error."""
     entries, i = [], 0
     while i < len(tokens):
@@ -57,11 +61,11 @@ def read_command_line(tokens, scene):
     return entries
 
 
-def duplicate_warnings(entries):
+def duplicate_warnings(entries: Sequence[Entry]) -> list[str]:
     """One line per option given more than once in the same source, with the value PETSc will use (the
     last one, in the order files and command line are read)."""
     used = {e.name: e for e in entries}
-    by_source = {}
+    by_source: dict[tuple[str, str], list[Entry]] = {}
     for e in entries:
         by_source.setdefault((e.source, e.name), []).append(e)
     lines = []
@@ -86,7 +90,7 @@ def _scene_problem(scene):
     return None
 
 
-def check_arguments(argv):
+def check_arguments(argv: Sequence[str]) -> tuple[str, list[str]]:
     """(scene, rest) of a valid command line, or raises ArgumentError. Prints duplicate warnings."""
     rest = list(argv[1:])
     scene = rest.pop(0) if rest and not is_option_name(rest[0]) else None
@@ -101,7 +105,7 @@ def check_arguments(argv):
     return scene, rest
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
     wants_help = any(a in ("-help", "--help", "-h") for a in argv[1:])
     if wants_help and (len(argv) < 2 or is_option_name(argv[1])):
@@ -132,7 +136,7 @@ def _stop_signal(signum, frame):
     raise StopSignal(signal.Signals(signum).name)
 
 
-def run(argv=None):
+def run(argv: Sequence[str] | None = None) -> int:
     """main(), with a stop signal before the run's own handling of it one line and exit code 7 instead of a
     traceback or a death by signal: Ctrl-C (SIGINT) raises KeyboardInterrupt, and SIGTERM and SIGUSR1 raise
     StopSignal from here on (the time loop installs its own handlers and puts these back after it)."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Collection, Sequence
 
 import numpy as np
 
@@ -27,7 +28,7 @@ def _nearest_existing(path):
     return path
 
 
-def probe_output_dir(path):
+def probe_output_dir(path: str) -> None:
     """The directory ``path`` can be created (or exists) and files can be written in it.
 
     Probed by creating and removing a temporary file in the directory, or in its nearest existing parent
@@ -47,7 +48,7 @@ def probe_output_dir(path):
                           "choose a writable directory") from None
 
 
-def output_bytes(n_points, n_cells, n_fault_faces, n_written, flow=False):
+def output_bytes(n_points: int, n_cells: int, n_fault_faces: int, n_written: int, flow: bool = False) -> int:
     """Rough size of a run's output: the mesh once, then per written step the displacement (and head) at
     the points, pore-pressure change, stress and material per cell, and ten values per fault face; and the
     checkpoint twice (the last one and the next, written beside it before it replaces it): solution and
@@ -63,7 +64,7 @@ def _gb(nbytes):
     return f"{nbytes / 1e9:.3g} GB"
 
 
-def check_output_space(path, nbytes):
+def check_output_space(path: str, nbytes: int) -> None:
     """The disk holding ``path`` (or its nearest existing parent) has ``nbytes`` free."""
     st = os.statvfs(_nearest_existing(os.path.abspath(path)))
     free = st.f_bavail * st.f_frsize
@@ -77,7 +78,7 @@ def check_output_space(path, nbytes):
 BYTES_PER_HEXAHEDRON = 1000   # building the serial box on rank 0: six tetrahedra and their temporaries
 
 
-def available_memory():
+def available_memory() -> int | None:
     """Bytes of memory available to new allocations (Linux MemAvailable), or None if unknown."""
     try:
         with open("/proc/meminfo") as fh:
@@ -89,7 +90,7 @@ def available_memory():
     return None
 
 
-def check_box_indices(cells, index_bytes):
+def check_box_indices(cells: Sequence[int], index_bytes: int) -> None:
     """A box of ``cells`` hexahedra has fewer unknowns than PETSc's indices (``index_bytes`` = 4 or 8) count."""
     nx, ny, nz = (int(c) for c in cells)
     dofs = 3 * (nx + 1) * (ny + 1) * (nz + 1)
@@ -98,7 +99,7 @@ def check_box_indices(cells, index_bytes):
                          f"unknowns exceed the {8 * index_bytes}-bit indices of this PETSc build; use fewer cells")
 
 
-def check_box_memory(cells):
+def check_box_memory(cells: Sequence[int]) -> None:
     """This machine has the memory to build a box of ``cells`` hexahedra (on one rank, so that the verdict
     does not depend on when each rank looked)."""
     nx, ny, nz = (int(c) for c in cells)
@@ -110,7 +111,7 @@ def check_box_memory(cells):
 
 
 # -- rigid-body motion ------------------------------------------------------------------------------
-def free_rigid_motions(points, mask):
+def free_rigid_motions(points: np.ndarray, mask: np.ndarray) -> tuple[list[int], list[int], int]:
     """Rigid-body motions that the Dirichlet constraints leave free.
 
     ``mask`` holds per vertex the prescribed displacement components (bits 0-2 for x, y, z). The six
@@ -154,7 +155,7 @@ def _axes(idx):
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
-def check_held(points, mask, surface_names):
+def check_held(points: np.ndarray, mask: np.ndarray, surface_names: Collection[str]) -> None:
     """InputError naming the option to set when the boundary conditions leave a rigid-body motion free.
 
     The check runs on the serial mesh before the faults are split, so a fault glues the two sides: a

@@ -46,7 +46,7 @@ def _last_words(sim, line, code):
         sim.last_words(line, code)
 
 
-def main(options_file, argv):
+def main(options_file: str, argv: list[str]) -> int:
     from .options import help_text
     from .solver.flow import FlowNotConverged
     from .simulation import Simulation

@@ -22,6 +22,8 @@ import errno
 import sys
 import time
 import traceback
+from collections.abc import Callable
+from typing import Any
 
 EXIT_OK = 0
 EXIT_INPUT = 1
@@ -46,7 +48,7 @@ EXIT_CODES = (
 )
 
 
-def exit_code_table():
+def exit_code_table() -> str:
     return "\n".join(["Exit codes (the same on every rank; mpirun returns them):"]
                      + [f"  {code}  {text}" for code, text in EXIT_CODES])
 
@@ -62,11 +64,11 @@ class PfaultError(Exception):
     exit_code = EXIT_INTERNAL
     kind = "error"
 
-    def __init__(self, message, detail=None):
+    def __init__(self, message: str, detail: str | None = None) -> None:
         super().__init__(message)
         self.detail = detail
 
-    def line(self, rank=None):
+    def line(self, rank: int | None = None) -> str:
         """The line printed for it; ``rank`` when only that rank failed."""
         where = "" if rank is None else f" on rank {rank} (the other ranks are stopped)"
         return f"pfault: {self.kind}{where}: {self}"
@@ -109,7 +111,7 @@ class StopSignal(KeyboardInterrupt):
     (without it the signal's default action would end the process with no message and no exit code of
     ours)."""
 
-    def __init__(self, name):
+    def __init__(self, name: str) -> None:
         super().__init__(name)
         self.name = name
 
@@ -118,7 +120,7 @@ _KINDS = {cls.__name__: cls for cls in (PfaultError, InputError, OutputError, Ou
                                         InternalError, Interrupted)}
 
 
-def as_pfault_error(exc):
+def as_pfault_error(exc: BaseException) -> PfaultError:
     """The PfaultError an exception ends the run with (out of memory, a full disk and bugs included)."""
     if isinstance(exc, PfaultError):
         return exc
@@ -155,7 +157,7 @@ def _unpack(packed):
     return _KINDS[kind](message, detail=detail)
 
 
-def collective_check(comm, message):
+def collective_check(comm: Any, message: str | None) -> None:
     """Raise InputError on every rank if any rank reports a problem.
 
     ``message`` is this rank's verdict: None when fine, otherwise a one-line text. The first
@@ -167,7 +169,7 @@ def collective_check(comm, message):
             raise InputError(m)
 
 
-def run_on_root(comm, func, *args, **kwargs):
+def run_on_root(comm: Any, func: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     """Run ``func`` on rank 0 only and share the exception it raises, if any, with every rank.
 
     Returns func's result on rank 0 and None elsewhere. Any exception on rank 0 (an InputError, a full
@@ -187,7 +189,7 @@ def run_on_root(comm, func, *args, **kwargs):
     return result
 
 
-def run_on_all(comm, func, *args, wait=SHARE_SECONDS):
+def run_on_all(comm: Any, func: Callable[..., Any], *args: Any, wait: float = SHARE_SECONDS) -> Any:
     """Run ``func`` on every rank and raise an exception any rank raised on every rank (the lowest failing
     rank's, as the same PfaultError); returns func's result. For work all ranks do together (output written
     in parallel), between collective calls: every rank gets here after its part.
@@ -223,7 +225,7 @@ def run_on_all(comm, func, *args, wait=SHARE_SECONDS):
     return result
 
 
-def write_line(text):
+def write_line(text: str) -> None:
     sys.stderr.write(text + "\n")
     sys.stderr.flush()
 
@@ -232,10 +234,11 @@ class RunGuard:
     """Ends a failed run on every rank. Created by every rank at the start of a run (it duplicates the
     communicator, so its barrier cannot be confused with a collective call the others are waiting in)."""
 
-    def __init__(self, comm):
+    def __init__(self, comm: Any) -> None:
         self.comm = _mpi(comm).Dup()
 
-    def settle(self, exc, wait=SETTLE_SECONDS, last_words=None):
+    def settle(self, exc: BaseException, wait: float = SETTLE_SECONDS,
+               last_words: Callable[[str, int], object] | None = None) -> int:
         """Called by a rank with an exception. Returns the exit code when every rank failed together (rank
         0 prints the line); otherwise prints this rank's line, calls ``last_words(line, exit code)`` (what
         this rank alone can still record: how the run ended, in summary.json) and aborts the MPI
@@ -277,5 +280,5 @@ class RunGuard:
                 sys.stderr.write(err.detail)
             write_line(err.line(rank))
 
-    def free(self):
+    def free(self) -> None:
         self.comm.Free()

@@ -9,8 +9,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from petsc4py import PETSc
+
+if TYPE_CHECKING:
+    from .mesh.distributed import LocalMesh
 
 DISPLACEMENT = "displacement"
 LAGRANGE = "lagrange_multiplier_fault"
@@ -26,13 +31,14 @@ class DofMap:
     n_local: int
     fields: tuple
 
-    def vertex_dofs(self, side=0):
+    def vertex_dofs(self, side: int = 0) -> np.ndarray:
         """(nv, 3) local dofs of the given side (side 1 falls back to side 0 where not split)."""
         base = self.vert_offset + 3 * np.where(self.vert_sides > 1, side, 0)
         return base[:, None] + np.arange(3)
 
 
-def build(mesh, vert_sides=None, cell_side=None, cell_multipliers=None):
+def build(mesh: LocalMesh, vert_sides: np.ndarray | None = None, cell_side: np.ndarray | None = None,
+          cell_multipliers: np.ndarray | None = None) -> DofMap:
     """Create the section and set it on the DM.
 
     vert_sides: (nv,) number of displacement sides per vertex (default 1)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from typing import Any, Literal
 
 SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1)
 
@@ -26,10 +27,10 @@ class StopRequest:
 
     Install it after meshing: gmsh resets the SIGINT handler when it initialises."""
 
-    def __init__(self, comm):
+    def __init__(self, comm: Any) -> None:
         self.mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
-        self.received = None
-        self._previous = {}
+        self.received: int | None = None
+        self._previous: dict[signal.Signals, Any] = {}
 
     def _handler(self, signum, frame):
         name = signal.Signals(signum).name
@@ -44,7 +45,7 @@ class StopRequest:
             sys.stderr.flush()
         self.received = signum
 
-    def __enter__(self):
+    def __enter__(self) -> StopRequest:
         for sig in SIGNALS:
             try:
                 self._previous[sig] = signal.signal(sig, self._handler)
@@ -52,13 +53,13 @@ class StopRequest:
                 break
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> Literal[False]:
         for sig, prev in self._previous.items():
             signal.signal(sig, prev if prev is not None else signal.SIG_DFL)
         self._previous = {}
         return False
 
-    def agreed(self):
+    def agreed(self) -> str | None:
         """The name of the signal any rank received (the highest number if several), or None: the same on
         every rank (collective: call it on every rank at the same point of the time loop)."""
         from mpi4py import MPI

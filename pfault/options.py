@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import difflib
 from dataclasses import dataclass, field
+from types import ModuleType
+from typing import Any
 
 from .errors import InputError, collective_check, exit_code_table
 from .units import parse_list, parse_quantity, parse_table
@@ -155,7 +157,7 @@ SPECS = [
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")
 
 
-def spec_for(name):
+def spec_for(name: str) -> Spec | None:
     """The Spec of a concrete option name (patterns matched by prefix and suffix)."""
     for s in SPECS:
         if s.name == name:
@@ -169,7 +171,7 @@ def spec_for(name):
     return None
 
 
-def help_text():
+def help_text() -> str:
     lines = ["pfault options (units in brackets; quantities accept units such as 10*year, -0.1*MPa):", ""]
     width = max(len(s.name) for s in SPECS) + 2
     for s in SPECS:
@@ -189,23 +191,23 @@ def help_text():
 class OptionReader:
     """Reads typed -pfault_ options and remembers which ones were asked for."""
 
-    def __init__(self, PETSc):
+    def __init__(self, PETSc: ModuleType) -> None:
         self.PETSc = PETSc
         self.db = PETSc.Options()
         self.queried: set[str] = set()
         self.resolved: dict[str, object] = {}
 
-    def has(self, name):
+    def has(self, name: str) -> bool:
         self.queried.add(name)
         return self.db.hasName(name)
 
-    def raw(self, name):
+    def raw(self, name: str) -> str | None:
         self.queried.add(name)
         if not self.db.hasName(name):
             return None
         return self.db.getString(name)
 
-    def get(self, name, default=..., kind=None):
+    def get(self, name: str, default: Any = ..., kind: str | None = None) -> Any:
         spec = spec_for(name)
         if spec is None:
             raise RuntimeError(f"option -{name} is not declared in pfault.options.SPECS")
@@ -249,12 +251,12 @@ class OptionReader:
             return [s.strip() for s in str(text).split(",") if s.strip()]
         raise RuntimeError(kind)
 
-    def unknown_pfault_options(self):
+    def unknown_pfault_options(self) -> list[str]:
         """-pfault_ options in the database that nothing asked for (typos, or names not in the mesh)."""
         names = [k for k in self.db.getAll() if k.startswith("pfault_")]
         return sorted(n for n in names if n not in self.queried)
 
-    def check_pfault_options(self):
+    def check_pfault_options(self) -> None:
         unknown = self.unknown_pfault_options()
         if unknown:
             raise InputError(_unknown_message(unknown[0], self.queried | {s.name for s in SPECS}))
@@ -284,13 +286,13 @@ _PETSC_LATE_OPTIONS = {"log_view", "options_left", "help", "options_file", "log_
                        "check_pointer_intensity", "error_output_stdout", "options_view"}
 
 
-def unused_petsc_options(PETSc):
+def unused_petsc_options(PETSc: ModuleType) -> list[str]:
     """Names of options in the PETSc database that no object has read (as -options_left reports)."""
     from .petsc_compat import options_left
     return sorted(x for x in options_left(PETSc) if x not in _PETSC_LATE_OPTIONS and not x.startswith("pfault_"))
 
 
-def check_unused_petsc_options(PETSc, reader):
+def check_unused_petsc_options(PETSc: ModuleType, reader: OptionReader) -> None:
     """InputError on every rank if any rank has an option that no PETSc object read: what each rank has
     read can differ (objects made on some ranks only, such as per-rank sub-solvers), and an error raised
     on one rank only would leave the others waiting."""

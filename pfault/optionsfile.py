@@ -3,6 +3,8 @@ a missing or looping nested ``-options_file`` is an ArgumentError naming the fil
 Used before PETSc starts (pfault.__main__: the scene and its includes) and for solver files
 (pfault.solver.setup)."""
 
+from __future__ import annotations
+
 import os
 from dataclasses import dataclass
 
@@ -14,7 +16,7 @@ COMMAND_LINE = "the command line"
 class ArgumentError(Exception):
     """One line, and the exit code it ends the run with."""
 
-    def __init__(self, message, code):
+    def __init__(self, message: str, code: int) -> None:
         super().__init__(message)
         self.code = code
 
@@ -27,7 +29,7 @@ class Entry:
     line: int           # line in the file (0 on the command line)
 
 
-def is_option_name(token):
+def is_option_name(token: str) -> bool:
     """PETSc's rule (PetscOptionsValidKey): '-' or '--' then a letter, and not a number such as -inf."""
     body = token[2:] if token.startswith("--") else token[1:]
     if not token.startswith("-") or not body[:1].isalpha():
@@ -43,7 +45,7 @@ def _name(token):
     return (token[2:] if token.startswith("--") else token[1:]).lower()
 
 
-def read_options_file(path, included_by=()):
+def read_options_file(path: str, included_by: tuple[str, ...] = ()) -> list[Entry]:
     """Entries of a PETSc options file, nested -options_file expanded in place (paths relative to the
     working directory, as PETSc reads them). Raises ArgumentError (exit 1) for what PETSc would reject."""
     if path in included_by:
@@ -61,7 +63,7 @@ def read_options_file(path, included_by=()):
     except UnicodeDecodeError:
         raise ArgumentError(f"{path}: not a text options file (binary content); give a PETSc options file "
                             "such as config/demo.opts", EXIT_INPUT) from None
-    entries = []
+    entries: list[Entry] = []
     for number, line in enumerate(text.splitlines(), start=1):
         tokens = line.split("#", 1)[0].split()
         if not tokens or tokens[0] == "alias":

@@ -7,12 +7,19 @@ gravity term; no drawdown table -> no pore-pressure load.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Collection, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import InputError
 from .physics.loading import MaterialDrawdown, Table
+
+if TYPE_CHECKING:
+    from .faults.settings import ContactSettings, FaultSettings
+    from .mesh.serial import SerialMesh
+    from .options import OptionReader
 
 
 @dataclass(frozen=True)
@@ -31,9 +38,9 @@ class Boundary:
     traction: tuple = (0.0, 0.0, 0.0)
     displacement: tuple = (0.0, 0.0, 0.0)
     components: int = 0  # bit mask of prescribed components (type displacement)
-    history: object = None  # Table of a scale factor, or None for constant 1
+    history: Table | None = None  # Table of a scale factor, or None for constant 1
 
-    def scale(self, t):
+    def scale(self, t: float) -> float:
         return 1.0 if self.history is None else self.history(t)
 
 
@@ -59,7 +66,7 @@ class Settings:
 K0_UNSET = -1.0
 
 
-def read_settings(reader, options_file=""):
+def read_settings(reader: OptionReader, options_file: str = "") -> Settings:
     stem = os.path.splitext(os.path.basename(options_file))[0] if options_file else "scene"
     scene = reader.get("pfault_scene") or stem
     out = reader.get("pfault_output_dir")
@@ -90,7 +97,7 @@ def read_settings(reader, options_file=""):
     return s
 
 
-def generator_options(reader, settings, index_bytes=4):
+def generator_options(reader: OptionReader, settings: Settings, index_bytes: int = 4) -> Callable[[], SerialMesh]:
     """Read the options of the built-in generator; returns a callable building the SerialMesh on rank 0.
     ``index_bytes``: size of PETSc's indices, which bounds the number of unknowns of a box."""
     if settings.mesh_file:
@@ -136,7 +143,7 @@ def generator_options(reader, settings, index_bytes=4):
                      "use box, wuxi or queretaro, or give -pfault_mesh_file")
 
 
-def check_ground_surface(reader, settings, surface_names):
+def check_ground_surface(reader: OptionReader, settings: Settings, surface_names: Collection[str]) -> None:
     """The land surface is a surface of the mesh; only the default 'top' may be missing (then subsidence
     is measured over all vertices)."""
     name = settings.ground_surface
@@ -146,7 +153,7 @@ def check_ground_surface(reader, settings, surface_names):
                      f"{', '.join(surface_names) or '(none: the mesh has no physical surfaces)'}")
 
 
-def read_materials(reader, names):
+def read_materials(reader: OptionReader, names: Iterable[str]) -> list[Material]:
     mats = []
     for name in names:
         p = f"pfault_material_{name}_"
@@ -170,8 +177,9 @@ def read_materials(reader, names):
     return mats
 
 
-def read_drawdown(reader, names, water_density, gravity):
-    tables = []
+def read_drawdown(reader: OptionReader, names: Iterable[str], water_density: float,
+                  gravity: float) -> MaterialDrawdown:
+    tables: list[Table | None] = []
     for name in names:
         p = f"pfault_material_{name}_"
         head = reader.get(p + "head_drawdown")
@@ -187,7 +195,8 @@ def read_drawdown(reader, names, water_density, gravity):
     return MaterialDrawdown(tables)
 
 
-def read_boundaries(reader, surface_names, exclude=()):
+def read_boundaries(reader: OptionReader, surface_names: Iterable[str],
+                    exclude: Collection[str] = ()) -> list[Boundary]:
     bcs = []
     for name in surface_names:
         if name in exclude:
@@ -214,7 +223,8 @@ def read_boundaries(reader, surface_names, exclude=()):
     return bcs
 
 
-def boundary_arrays(serial, bcs, ground_surface):
+def boundary_arrays(serial: SerialMesh, bcs: Sequence[Boundary],
+                    ground_surface: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-vertex constraint masks, per-cell face tags and ground flags on the serial mesh.
 
     A roller fixes the displacement component normal to its surface, which must be a coordinate plane.
@@ -257,7 +267,7 @@ def boundary_arrays(serial, bcs, ground_surface):
     return mask, face_tag, np.column_stack([ground, disp_surface])
 
 
-def read_faults(reader, surface_names):
+def read_faults(reader: OptionReader, surface_names: Collection[str]) -> list[FaultSettings]:
     from .faults.settings import FaultSettings
     names = reader.get("pfault_faults")
     faults = []
@@ -281,7 +291,7 @@ def read_faults(reader, surface_names):
     return faults
 
 
-def read_contact_options(reader):
+def read_contact_options(reader: OptionReader) -> ContactSettings:
     from .faults.settings import ContactSettings
     return ContactSettings(effective_stress=reader.get("pfault_contact_effective_stress"),
                            suction=reader.get("pfault_contact_suction"),

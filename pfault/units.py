@@ -5,6 +5,8 @@ already. Each option declares its unit (pfault.options.SPECS); a unit of another
 (``100*MPa`` as a length), and so is a value that is not finite (``1e999``).
 """
 
+from __future__ import annotations
+
 import math
 import re
 
@@ -59,7 +61,7 @@ _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _QUANTITY = re.compile(rf"^\s*({_NUMBER})\s*(?:\*\s*([A-Za-z0-9][A-Za-z0-9/*^]*))?\s*$")
 
 
-def dimension(unit):
+def dimension(unit: str) -> tuple[int, int, int, int]:
     """Dimension of a declared unit ('' is a plain number)."""
     if not unit:
         return _ONE
@@ -72,7 +74,7 @@ def _example(unit):
     return {"": "0.25", "s": "10*year", "m": "20*m", "Pa": "-0.1*MPa", "degree": "30"}.get(unit, f"1*{unit}")
 
 
-def parse_quantity(text, option="value", unit=None):
+def parse_quantity(text: str, option: str = "value", unit: str | None = None) -> float:
     """Parse ``number`` or ``number*unit`` into a finite float in SI units.
 
     ``unit`` is the option's declared unit: a given unit must have its dimension ('' takes plain numbers
@@ -102,15 +104,15 @@ def parse_quantity(text, option="value", unit=None):
     return value
 
 
-def parse_list(text, option="value", unit=None):
+def parse_list(text: str, option: str = "value", unit: str | None = None) -> list[float]:
     """Comma-separated list of quantities."""
     items = [s for s in str(text).split(",") if s.strip()]
     return [parse_quantity(s, option, unit) for s in items]
 
 
-def parse_table(text, option="value", unit=None):
+def parse_table(text: str, option: str = "value", unit: str | None = None) -> list[tuple[float, float]]:
     """Piecewise-linear table ``t0:v0,t1:v1,...`` with strictly increasing times; values in ``unit``."""
-    pairs = []
+    pairs: list[tuple[float, float]] = []
     for item in str(text).split(","):
         if not item.strip():
             continue

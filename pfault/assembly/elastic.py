@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 from petsc4py import PETSc
 
 from ..mesh.serial import TET_FACES
 from ..physics import elasticity as el
 
+if TYPE_CHECKING:
+    from ..fields import DofMap
+    from ..mesh.distributed import LocalMesh
+    from ..scene import Material
+
 CHUNK = 4096     # cells per kernel batch: element matrices of a batch stay in cache
 
 
 class ElasticAssembler:
-    def __init__(self, mesh, dofmap, materials):
+    def __init__(self, mesh: LocalMesh, dofmap: DofMap, materials: Sequence[Material]) -> None:
         self.mesh = mesh
         self.dofmap = dofmap
         self.materials = materials
@@ -28,7 +36,7 @@ class ElasticAssembler:
         self.centroids = mesh.coords[mesh.cells].mean(axis=1)
 
     # -- operator ----------------------------------------------------------------------------
-    def add_stiffness(self, mat, blocked=False):
+    def add_stiffness(self, mat: PETSc.Mat, blocked: bool = False) -> None:
         """Add element stiffness matrices into ``mat`` (local numbering), in batches of CHUNK cells; ``blocked``:
         as 3x3 blocks of the vertices' local block indices (a matrix whose local-to-global map has block size
         3; a vertex's 3 dofs are consecutive and start at a multiple of 3)."""
@@ -41,23 +49,23 @@ class ElasticAssembler:
             insert(idx[e], idx[e], ke.reshape(len(ke), 144), addv=PETSc.InsertMode.ADD_VALUES)
 
     # -- loads (local arrays, to be added with localToGlobal) ---------------------------------
-    def scatter_cell_forces(self, fe, out):
+    def scatter_cell_forces(self, fe: np.ndarray, out: np.ndarray) -> None:
         """Add nodal forces fe (nc,4,3) into the local array ``out`` (bincount, no Python loop)."""
         out += np.bincount(self.dofmap.cell_dofs.ravel(), weights=fe.reshape(-1), minlength=len(out))
 
-    def pore_pressure_load(self, dp, out):
+    def pore_pressure_load(self, dp: np.ndarray, out: np.ndarray) -> None:
         self.scatter_cell_forces(el.pore_pressure_force(self.grad, self.vol, self.alpha * dp), out)
 
-    def gravity_load(self, g, out):
+    def gravity_load(self, g: float, out: np.ndarray) -> None:
         b = np.zeros((len(self.vol), 3))
         b[:, 2] = -self.density * g
         self.scatter_cell_forces(el.body_force(self.vol, b), out)
 
-    def initial_stress_load(self, sigma0, out):
+    def initial_stress_load(self, sigma0: np.ndarray, out: np.ndarray) -> None:
         """Right-hand side of a prestress: -int B^T sigma0."""
         self.scatter_cell_forces(-el.stress_divergence_force(self.grad, self.vol, sigma0), out)
 
-    def traction_load(self, tractions, out):
+    def traction_load(self, tractions: Sequence[Sequence[float]], out: np.ndarray) -> None:
         """Constant tractions on tagged boundary faces; tractions[tag] = (tx, ty, tz)."""
         tag = self.mesh.cell_face_tag
         cell, lface = np.nonzero(tag >= 0)
@@ -71,9 +79,9 @@ class ElasticAssembler:
         out += np.bincount(local.ravel(), weights=f.ravel(), minlength=len(out))
 
     # -- post-processing ----------------------------------------------------------------------
-    def cell_displacements(self, u_local):
+    def cell_displacements(self, u_local: np.ndarray) -> np.ndarray:
         return u_local[self.dofmap.cell_dofs].reshape(-1, 4, 3)
 
-    def effective_stress(self, u_local):
+    def effective_stress(self, u_local: np.ndarray) -> np.ndarray:
         """Incremental effective stress C:eps(u) per cell (nc,3,3)."""
         return el.stress(el.strain(self.grad, self.cell_displacements(u_local)), self.lam, self.mu)

@@ -43,14 +43,14 @@ class FaceLaw:
     c_n: np.ndarray         # normal stiffness (Pa/m): augmentation (Lagrange) or penalty
     c_t: np.ndarray         # tangential stiffness (Pa/m)
 
-    def __getitem__(self, idx):
+    def __getitem__(self, idx: np.ndarray | slice) -> FaceLaw:
         return FaceLaw(*(getattr(self, f.name)[idx] for f in fields(self)))
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.area)
 
 
-def local_frames(normal):
+def local_frames(normal: np.ndarray) -> np.ndarray:
     """Rotation matrices (nf,3,3) with rows n, m1, m2; m1 horizontal (strike) unless n is near vertical."""
     n = normal / np.linalg.norm(normal, axis=1)[:, None]
     ref = np.where(np.abs(n[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
@@ -60,11 +60,11 @@ def local_frames(normal):
     return np.stack([n, m1, m2], axis=1)
 
 
-def coulomb_limit(t_n, cohesion, tan_phi):
+def coulomb_limit(t_n: np.ndarray, cohesion: np.ndarray, tan_phi: np.ndarray) -> np.ndarray:
     return np.maximum(cohesion - tan_phi * t_n, 0.0)
 
 
-def states(law, g, g_prev, t, tol=0.0):
+def states(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t: np.ndarray, tol: float = 0.0) -> np.ndarray:
     """Stick/slip/open of each face at the iterate (g, t): the branch of the semismooth residual. With tol > 0
     (Pa) a face within tol of a switch is reported in the branch that holds it in place (closed, stuck): at zero
     traction and zero jump a face is at once open, slipping and stuck, and round-off must not pick one."""
@@ -76,7 +76,8 @@ def states(law, g, g_prev, t, tol=0.0):
     return np.where(closed, np.where(slip, SLIP, STICK), OPEN)
 
 
-def lagrange_rows(law, g, g_prev, t, state=None):
+def lagrange_rows(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t: np.ndarray, state: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Semismooth residual rows r (nf,3) of the faces, their state, and the generalised derivatives
     d r/d g (nf,3,3) and d r/d t (nf,3,3) (local frame; t the effective traction). ``state``: the branches to
     take instead of the iterate's (stick or open only: the linear elastic trial of a step)."""
@@ -115,7 +116,9 @@ def lagrange_rows(law, g, g_prev, t, state=None):
     return st, r * A[:, None], dg * A[:, None, None], dt * A[:, None, None]
 
 
-def penalty_traction(law, g, g_prev, t_prev, t0_n=None, branch=None):
+def penalty_traction(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t_prev: np.ndarray,
+                     t0_n: np.ndarray | None = None,
+                     branch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Penalty contact: traction (nf,3), derivative dt/dg (nf,3,3) and state.
 
     t_N = t0_N + c_N g_N while in contact (t_N <= 0), 0 when open; tangential return map from
@@ -151,7 +154,7 @@ def penalty_traction(law, g, g_prev, t_prev, t0_n=None, branch=None):
     return t, d, state
 
 
-def transition_counts(old, new):
+def transition_counts(old: np.ndarray, new: np.ndarray) -> np.ndarray:
     """3x3 table: counts[i, j] faces going from state i to state j."""
     c = np.zeros((3, 3), dtype=np.int64)
     np.add.at(c, (old, new), 1)

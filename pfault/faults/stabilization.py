@@ -9,10 +9,18 @@ state constrains: all three of a stuck face, the normal one of a slipping face, 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ..physics import elasticity as el
 from . import contact as ct
+
+if TYPE_CHECKING:
+    from ..mesh.fault import FaultSplit
+    from ..mesh.serial import SerialMesh
+    from ..scene import Material
 
 # S as a fraction of the local compliance estimate. The stabilisation is a consistency error: a closed face
 # next to a face whose traction changed differently takes a jump S (dt_b - dt_a) / A, so near an opening front
@@ -27,7 +35,8 @@ from . import contact as ct
 COMPLIANCE_FRACTION = 0.01
 
 
-def stabilization_pairs(serial, split, materials, fraction=COMPLIANCE_FRACTION):
+def stabilization_pairs(serial: SerialMesh, split: FaultSplit, materials: Sequence[Material],
+                        fraction: float = COMPLIANCE_FRACTION) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of fault faces sharing an edge and their stabilisation matrices (local frame).
 
     Following Franceschini, Castelletto, White & Tchelepi (CMAME 2020): for the two faces f0, f1 of a
@@ -72,7 +81,8 @@ def stabilization_pairs(serial, split, materials, fraction=COMPLIANCE_FRACTION):
     return np.column_stack([f0, f1]), S * areafac[:, None, None]
 
 
-def stabilization_rows(pairs, S, pos, dt_all, g_lm_all):
+def stabilization_rows(pairs: np.ndarray, S: np.ndarray, pos: np.ndarray, dt_all: np.ndarray, g_lm_all: np.ndarray
+                       ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]]:
     """Stabilisation of this rank's faces, in jump units (m^3): the terms S (dt_b - dt_a) that the stabilised
     jump A g + S (dt_b - dt_a) of each owned face adds (``pos``: serial face -> owned index or -1), and their
     derivatives as blocks [(owned index of the face, row dofs, col dofs, d/dt (n,3,3))]. ``dt_all``: the
@@ -95,7 +105,7 @@ def stabilization_rows(pairs, S, pos, dt_all, g_lm_all):
     return r, blocks
 
 
-def stabilization_pattern(pairs, pos, g_lm_all):
+def stabilization_pattern(pairs: np.ndarray, pos: np.ndarray, g_lm_all: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(rows, cols) global index pairs of the stabilisation blocks in rows this rank owns."""
     rows, cols = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     for a, b in ((0, 1), (1, 0)):

@@ -50,6 +50,7 @@ from __future__ import annotations
 import json
 import os
 from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from petsc4py import PETSc
@@ -59,12 +60,18 @@ from ..mesh import distributed
 from . import parallel, run_options
 from .output import TMP_SUFFIX, open_h5
 
+if TYPE_CHECKING:
+    from ..fields import DofMap
+    from ..mesh.distributed import LocalMesh
+    from ..model import Model
+    from ..state import State
+
 FORMAT = 4                     # 3: no faults/traction; 2: multipliers per serial cell; 1: fault states
 NAME = "checkpoint.h5"
 VERTEX, CELL, FACE = "vertex", "cell", "face"      # what a dataset's rows are
 
 
-def vertex_dofs(dofmap):
+def vertex_dofs(dofmap: DofMap) -> np.ndarray:
     """Local dofs of each local vertex (nv, 6): side 0, then side 1 (-1 where a vertex has a single side)."""
     sides = dofmap.vertex_dofs(0), dofmap.vertex_dofs(1)
     return np.concatenate([sides[0], np.where((dofmap.vert_sides > 1)[:, None], sides[1], -1)], axis=1)
@@ -74,7 +81,8 @@ def _take(local, dofs):
     return np.where(dofs >= 0, local[np.maximum(dofs, 0)], 0.0)
 
 
-def local_state(model, state, step, t, records):
+def local_state(model: Model, state: State, step: int, t: float, records: list[dict[str, Any]]
+                ) -> tuple[dict[str, tuple[str, np.ndarray]], dict[str, Any], dict[str, bytes]]:
     """This rank's part of ``state`` (pfault.state.State) of ``model`` (pfault.model.Model) after step ``step``
     at time t: ({dataset: (VERTEX, CELL or FACE, values per local vertex, local cell or owned fault face)}, root
     attributes, {dataset: JSON as bytes}: the step records ``records`` and the flow model's). The attributes and
@@ -129,7 +137,8 @@ class Writer:
     docstring) or gathered to rank 0. ``faces``: the serial ids of the fault faces this rank owns (None without
     faults). Every method is collective."""
 
-    def __init__(self, comm, mesh, faces=None, n_faces=0, parallel_io=False):
+    def __init__(self, comm: Any, mesh: LocalMesh, faces: np.ndarray | None = None, n_faces: int = 0,
+                 parallel_io: bool = False) -> None:
         self.mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
         self.mesh, self.parallel = mesh, bool(parallel_io)
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
@@ -143,7 +152,8 @@ class Writer:
             self.rows[FACE] = parallel.Rows(self.faces, self.n_faces)
         self.blocks = parallel.blocks(self.mpi, NAME, self.rows)
 
-    def write(self, directory, model, state, step, t, records):
+    def write(self, directory: str, model: Model, state: State, step: int, t: float,
+              records: list[dict[str, Any]]) -> None:
         """The checkpoint of ``state`` after step ``step`` at time t, with the run's step records up to it, into
         ``directory`` (known to every rank)."""
         data, attrs, texts = local_state(model, state, step, t, records)
@@ -244,7 +254,7 @@ def _not_readable(run_dir, exc):
     return InputError(f"-pfault_restart {run_dir}: {NAME} is not readable ({exc})")
 
 
-def read_attrs(run_dir):
+def read_attrs(run_dir: str) -> dict[str, Any]:
     """The root attributes of a run directory's checkpoint, once its format is checked (rank 0)."""
     path = os.path.join(run_dir, NAME)
     if not os.path.isfile(path):
@@ -262,9 +272,9 @@ def read_attrs(run_dir):
     return attrs
 
 
-def read_datasets(run_dir):
+def read_datasets(run_dir: str) -> dict[str, np.ndarray]:
     """Every dataset of a run directory's checkpoint: {dataset path: array} (any rank)."""
-    out = {}
+    out: dict[str, np.ndarray] = {}
     try:
         with open_h5(os.path.join(run_dir, NAME), "r") as h5:
             h5.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if hasattr(obj, "shape") else None)
@@ -273,7 +283,7 @@ def read_datasets(run_dir):
     return out
 
 
-def check(attrs, run_dir, model, state):
+def check(attrs: dict[str, Any], run_dir: str, model: Model, state: State) -> None:
     """InputError where the checkpoint (its attributes) does not belong to this scene and load (rank 0)."""
     s = model.settings
     run_options.check_options(run_dir, dict(PETSc.Options().getAll()), float(attrs["time_s"]),
@@ -289,7 +299,7 @@ def check(attrs, run_dir, model, state):
                              f"{value}; restart with the scene and mesh options of that run")
 
 
-def restore(ckpt, attrs, model, state):
+def restore(ckpt: dict[str, np.ndarray], attrs: dict[str, Any], model: Model, state: State) -> None:
     """Put the checkpoint's state ({dataset path: serial array}, ``attrs``) into ``state``; every rank holds
     them. The time loop then goes on as after the checkpoint's step: its next step's ``begin_step`` measures the
     faces' start from the restored u under the restored pore pressure."""
@@ -326,7 +336,7 @@ def restore(ckpt, attrs, model, state):
                      json.loads(bytes(ckpt["flow/history"]).decode()))
 
 
-def load(comm, run_dir, model, state):
+def load(comm: Any, run_dir: str, model: Model, state: State) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Check the checkpoint of ``run_dir`` on rank 0, read it on every rank and restore it into ``state``;
     returns its attributes and the run's step records up to its step. Collective; an InputError is raised on
     every rank together."""

@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -58,14 +59,14 @@ class Snapshot:
     num_steps: int = 0
 
 
-def read_summary(run_dir):
+def read_summary(run_dir: str) -> dict[str, Any]:
     with open(os.path.join(run_dir, "summary.json")) as fh:
         return json.load(fh)
 
 
-def read_options(run_dir):
+def read_options(run_dir: str) -> dict[str, str]:
     """The resolved options of a run (options.txt) as {name without '-': value string ('' for flags)}."""
-    out = {}
+    out: dict[str, str] = {}
     path = os.path.join(run_dir, "options.txt")
     if not os.path.exists(path):
         return out
@@ -79,7 +80,7 @@ def read_options(run_dir):
     return out
 
 
-def read_materials(run_dir):
+def read_materials(run_dir: str) -> dict[int, str]:
     """{material id: name} from materials.json."""
     with open(os.path.join(run_dir, "materials.json")) as fh:
         return {int(k): v for k, v in json.load(fh).items()}
@@ -99,25 +100,25 @@ def _read_series(path, step, cell_type):
                     {k: np.asarray(v) for k, v in point_data.items()}, cell_data, n)
 
 
-def read_fields(run_dir, step=-1):
+def read_fields(run_dir: str, step: int = -1) -> Snapshot:
     """Mesh (split fault vertices appear twice; plus-side cells use the copies) and fields at one time:
     point data ``displacement`` (m, relative to the initial state), ``head_change`` (m, flow scenes); cell data
     ``material``, ``pore_pressure_change`` (Pa), ``stress`` (Pa)."""
     return _read_series(os.path.join(run_dir, "fields.xdmf"), step, "tetra")
 
 
-def read_fault(run_dir, step=-1):
+def read_fault(run_dir: str, step: int = -1) -> Snapshot:
     """Fault triangles (on the serial points, i.e. the minus-side vertices) and per-face fields at one time:
     ``opening`` (m), ``slip`` (m, 3 components), ``slip_magnitude`` (m), ``traction_normal`` (Pa),
     ``traction_shear`` (Pa), ``state`` (stick/slip/open code), ``fault`` (fault index)."""
     return _read_series(os.path.join(run_dir, "fault.xdmf"), step, "triangle")
 
 
-def has_fault(run_dir):
+def has_fault(run_dir: str) -> bool:
     return os.path.exists(os.path.join(run_dir, "fault.xdmf"))
 
 
-def top_surface(points, tets, rtol=1e-9):
+def top_surface(points: np.ndarray, tets: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
     """Triangles (k, 3) of the mesh faces lying on the plane z = max z (the land surface)."""
     z = points[:, 2]
     ztop = z.max()
@@ -126,7 +127,7 @@ def top_surface(points, tets, rtol=1e-9):
     return faces[on[faces].all(axis=1)]
 
 
-def face_geometry(points, tris):
+def face_geometry(points: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unit normals (minus -> plus), areas and centroids of triangles."""
     x = points[tris]
     cross = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
@@ -134,14 +135,14 @@ def face_geometry(points, tris):
     return cross / np.maximum(area2, 1e-300)[:, None], 0.5 * area2, x.mean(axis=1)
 
 
-def plane_axes(normals):
+def plane_axes(normals: np.ndarray) -> tuple[int, tuple[int, ...]]:
     """Axis index normal to a (near) coordinate-plane fault and the two in-plane axes, e.g. (0, (1, 2)) for
     a vertical fault x = const: plot it in (y, z)."""
     a = int(np.argmax(np.abs(normals).mean(axis=0)))
     return a, tuple(i for i in range(3) if i != a)
 
 
-def dip_slip(slip, normals):
+def dip_slip(slip: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Slip component along the up-dip direction of each face (positive: plus side up relative to minus);
     for a vertical fault this is the vertical slip u_z(plus) - u_z(minus)."""
     ez = np.array([0.0, 0.0, 1.0])
@@ -151,7 +152,7 @@ def dip_slip(slip, normals):
     return np.einsum("ij,ij->i", slip, d)
 
 
-def nodal_jumps(fields, fault):
+def nodal_jumps(fields: Snapshot, fault: Snapshot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Displacement jumps at the split fault vertices (plus copy minus original), from fields.xdmf.
 
     fields.xdmf holds the serial vertices followed by one copy per split vertex (used by the plus-side
@@ -180,7 +181,7 @@ def nodal_jumps(fields, fault):
     return P[orig], u[copies] - u[orig], vn
 
 
-def surface_fault_jumps(fields, fault, rtol=1e-9):
+def surface_fault_jumps(fields: Snapshot, fault: Snapshot, rtol: float = 1e-9) -> tuple[float, float]:
     """Largest nodal opening and slip magnitude (m) of the split fault vertices on the land surface z = max z
     (the width and offset one would measure across a fissure or scarp in the field)."""
     p, jump, n = nodal_jumps(fields, fault)
@@ -193,7 +194,7 @@ def surface_fault_jumps(fields, fault, rtol=1e-9):
     return float(np.max(jn[top], initial=0.0)), float(np.max(slip[top], initial=0.0))
 
 
-def wells_from_options(options):
+def wells_from_options(options: dict[str, str]) -> np.ndarray:
     """Well (x, y) pairs of a flow scene from its resolved options, or an empty (0, 2) array."""
     raw = options.get("pfault_flow_wells", "")
     try:
@@ -247,7 +248,7 @@ def _binned(s, values, nbins, how):
     return 0.5 * (edges[1:] + edges[:-1]), out
 
 
-def fault_figure(run_dir, out=None, step=-1):
+def fault_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     """Opening and slip over the fault plane(s) at one output time; returns the PNG path."""
     plt = _pyplot()
     from matplotlib.tri import Triangulation
@@ -321,7 +322,8 @@ def _layer_with_largest(points, values, rtol=1e-9):
     return zl, np.abs(z - zl) <= tol
 
 
-def profile_along_x(points, tris, values, xs, y0):
+def profile_along_x(points: np.ndarray, tris: np.ndarray, values: np.ndarray, xs: np.ndarray,
+                    y0: float) -> np.ndarray:
     """P1 values on surface triangles sampled at (xs, y0) (NaN outside). Split fault vertices make the
     triangulation non-conforming for matplotlib's tri finders, so this is a direct barycentric search over
     the triangles whose y-range holds y0; at a point on a fault trace the first triangle found wins."""
@@ -352,7 +354,7 @@ def _nice_levels(vmin, vmax, n=20):
     return MaxNLocator(nbins=n).tick_values(vmin, vmax)
 
 
-def subsidence_figure(run_dir, out=None, step=-1):
+def subsidence_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     """Land subsidence map (and the drawdown map of flow scenes) at one output time, with a subsidence profile
     along x through the point of largest subsidence; returns the PNG path."""
     plt = _pyplot()
@@ -447,7 +449,7 @@ def subsidence_figure(run_dir, out=None, step=-1):
     return _save(fig, out)
 
 
-def histories_figure(run_dir, out=None):
+def histories_figure(run_dir: str, out: str | None = None) -> str:
     """Maxima against time and solver work per step, from summary.json; returns the PNG path."""
     plt = _pyplot()
     summary = read_summary(run_dir)
@@ -496,17 +498,17 @@ def histories_figure(run_dir, out=None):
     return _save(fig, out)
 
 
-def read_surface(run_dir, step=-1):
+def read_surface(run_dir: str, step: int = -1) -> Snapshot:
     """Land-surface triangles and fields at one time: point data ``displacement`` (m), cell data
     ``horizontal_strain``, ``angular_distortion`` (pfault.io.hazard)."""
     return _read_series(os.path.join(run_dir, "surface.xdmf"), step, "triangle")
 
 
-def has_surface(run_dir):
+def has_surface(run_dir: str) -> bool:
     return os.path.exists(os.path.join(run_dir, "surface.xdmf"))
 
 
-def hazard_figure(run_dir, out=None, step=-1):
+def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     """Earth-fissure hazard map of the land surface at one output time: largest horizontal principal strain
     and angular distortion per surface triangle, fault traces dashed, maxima marked, and the largest value
     of each over y against x; returns the PNG path."""
@@ -562,7 +564,7 @@ def hazard_figure(run_dir, out=None, step=-1):
     return _save(fig, out)
 
 
-def make_figures(run_dir, step=-1):
+def make_figures(run_dir: str, step: int = -1) -> list[str]:
     """All figures of a run directory; returns the paths written."""
     paths = []
     if has_fault(run_dir):
@@ -574,7 +576,7 @@ def make_figures(run_dir, step=-1):
     return paths
 
 
-def write_run_figures(run_dir):
+def write_run_figures(run_dir: str) -> list[str]:
     """The figures a finished run writes next to its output (rank 0). A figure that fails is reported, not
     raised: the run's results are on disk already."""
     import sys

@@ -14,11 +14,17 @@ largest) carry zero. Rank 0, on the output mesh (pfault.simulation), NumPy only.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..mesh.serial import TET_FACES, locate_faces
+
+if TYPE_CHECKING:
+    from ..mesh.fault import FaultSplit
+    from ..mesh.serial import SerialMesh
 
 FIELDS = ("horizontal_strain", "angular_distortion")
 
@@ -30,7 +36,8 @@ class Surface:
     triangles: np.ndarray    # (m, 3) indices into points
 
 
-def land_surface(points, tets, serial, split, name):
+def land_surface(points: np.ndarray, tets: np.ndarray, serial: SerialMesh, split: FaultSplit | None,
+                 name: str) -> Surface | None:
     """The land surface on the output mesh (points, tets: split fault vertices appear twice, plus-side cells
     use the copies): the triangles of the physical surface ``name``, or those on the plane z = max z when the
     mesh has no such surface; None when neither gives a triangle."""
@@ -50,7 +57,7 @@ def land_surface(points, tets, serial, split, name):
     return Surface(vertices=verts, points=points[verts], triangles=inv.reshape(-1, 3).astype(np.int64))
 
 
-def surface_fields(points, triangles, u):
+def surface_fields(points: np.ndarray, triangles: np.ndarray, u: np.ndarray) -> dict[str, np.ndarray]:
     """Hazard fields per triangle (dict of (m,) arrays) from the displacement u (k, 3) at the points."""
     x = points[triangles]
     e1, e2 = x[:, 1, :2] - x[:, 0, :2], x[:, 2, :2] - x[:, 0, :2]
@@ -66,9 +73,10 @@ def surface_fields(points, triangles, u):
     return {"horizontal_strain": np.where(ok, strain, 0.0), "angular_distortion": np.where(ok, distortion, 0.0)}
 
 
-def maxima(points, triangles, fields):
+def maxima(points: np.ndarray, triangles: np.ndarray,
+           fields: dict[str, np.ndarray]) -> dict[str, float | list[float] | None]:
     """{max_<field>: value, max_<field>_xy: [x, y] of the triangle's centroid} for both hazard fields."""
-    out = {}
+    out: dict[str, float | list[float] | None] = {}
     centroids = points[triangles].mean(axis=1)
     for name in FIELDS:
         values = fields[name]
@@ -78,9 +86,9 @@ def maxima(points, triangles, fields):
     return out
 
 
-def summary_maxima(records):
+def summary_maxima(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """The largest hazard values over the step records that have them, where and when they occur."""
-    out = {}
+    out: dict[str, Any] = {}
     for name in FIELDS:
         key = f"max_{name}"
         have = [r for r in records if r.get(key) is not None]

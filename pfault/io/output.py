@@ -25,8 +25,13 @@ import os
 import platform
 import shutil
 import subprocess
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import h5py
 
 # names pfault writes into a run directory: replaced by a new run; anything else there is carried over
 SERIES = ("fields", "fault", "surface")
@@ -35,15 +40,20 @@ RUN_FILES = frozenset([f"{s}.{e}" for s in SERIES for e in ("xdmf", "h5")]
                          "fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"])
 TMP_SUFFIX = ".tmp"
 
+# what an XDMF file says of a dataset, (shape, dtype), and of a written step, (group path, time, its datasets)
+Description = tuple[tuple[int, ...], np.dtype]
+XdmfEntry = tuple[str, float, list[tuple[str, str, Description]]]
 
-def package_versions():
+
+def package_versions() -> dict[str, str | None]:
     from petsc4py import PETSc
     import mpi4py
     import petsc4py
     import pfault
-    versions = {"pfault": pfault.__version__, "python": platform.python_version(), "numpy": np.__version__,
-                "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()), "petsc4py": petsc4py.__version__,
-                "mpi4py": mpi4py.__version__}
+    versions: dict[str, str | None] = {
+        "pfault": pfault.__version__, "python": platform.python_version(), "numpy": np.__version__,
+        "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()), "petsc4py": petsc4py.__version__,
+        "mpi4py": mpi4py.__version__}
     for name in ("meshio", "gmsh", "h5py"):
         try:
             mod = __import__(name)
@@ -54,7 +64,7 @@ def package_versions():
     return versions
 
 
-def git_hash():
+def git_hash() -> str | None:
     here = os.path.dirname(os.path.abspath(__file__))
     try:
         out = subprocess.run(["git", "-C", here, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
@@ -67,7 +77,7 @@ def git_hash():
     return out.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
 
 
-def replace_text(path, text, tmp=None):
+def replace_text(path: str, text: str, tmp: str | None = None) -> None:
     """Write a text file whole: into a temporary sibling (``tmp``, default ``path`` + TMP_SUFFIX), then
     os.replace (atomic on POSIX)."""
     tmp = path + TMP_SUFFIX if tmp is None else tmp
@@ -76,11 +86,11 @@ def replace_text(path, text, tmp=None):
     os.replace(tmp, path)
 
 
-def replace_json(path, data, tmp=None):
+def replace_json(path: str, data: Any, tmp: str | None = None) -> None:
     replace_text(path, json.dumps(data, indent=2) + "\n", tmp)
 
 
-def record_failure(directory, line, code, not_converged=False):
+def record_failure(directory: str, line: str, code: int, not_converged: bool = False) -> None:
     """The summary.json in ``directory`` (that of the run's last completed step) says how the run ended:
     ``running`` false, the ``error`` line and the ``exit_code`` (``converged`` false when a solve failed).
 
@@ -96,7 +106,7 @@ def record_failure(directory, line, code, not_converged=False):
     replace_json(path, summary, tmp=f"{path}.{os.getpid()}{TMP_SUFFIX}")
 
 
-def open_h5(path, mode):
+def open_h5(path: str, mode: str) -> h5py.File:
     """h5py File without HDF5's file lock, so that a viewer may read what has been flushed while a run
     writes (HDF5 >= 1.10.7; older versions lock)."""
     import h5py
@@ -112,7 +122,7 @@ def open_h5(path, mode):
 _TOPOLOGY = {4: "Tetrahedron", 3: "Triangle"}
 
 
-def describe(arr):
+def describe(arr: np.ndarray | h5py.Dataset) -> Description:
     """(shape, dtype) of an array or dataset: what the XDMF file says about it (nothing is read)."""
     return tuple(arr.shape), np.dtype(arr.dtype)
 
@@ -131,7 +141,8 @@ def _attribute_type(shape):
     return {3: "Vector", 9: "Tensor"}.get(shape[1], "Matrix")
 
 
-def write_xdmf(directory, name, mesh, entries):
+def write_xdmf(directory: str, name: str, mesh: tuple[Description, Description],
+               entries: Iterable[XdmfEntry]) -> None:
     """``NAME.xdmf``: the mesh (``mesh``: descriptions of /mesh/points and /mesh/cells) and the steps in
     ``entries`` [(group path, time, [(dataset name, center, description)])], from what was written, without
     reading the HDF5 file back."""
@@ -158,7 +169,7 @@ def write_xdmf(directory, name, mesh, entries):
     replace_text(os.path.join(directory, name + ".xdmf"), "\n".join(lines))
 
 
-def step_entry(grp):
+def step_entry(grp: h5py.Group) -> XdmfEntry:
     """The XDMF entry of a written step group."""
     return grp.name, float(grp.attrs["time"]), [(k, ds.attrs["center"], describe(ds)) for k, ds in grp.items()]
 
@@ -170,7 +181,7 @@ class XdmfSeries:
     meshio.xdmf.TimeSeriesReader and ParaView). Rank 0 only (pfault.io.parallel.ParallelSeries continues one
     on every rank)."""
 
-    def __init__(self, directory, name, points, cells):
+    def __init__(self, directory: str, name: str, points: np.ndarray, cells: np.ndarray) -> None:
         self.directory, self.name = directory, name
         self.h5name = name + ".h5"
         self.h5 = open_h5(os.path.join(directory, self.h5name), "w")
@@ -179,11 +190,12 @@ class XdmfSeries:
         cells = mesh.create_dataset("cells", data=np.asarray(cells, dtype=np.int64))
         self.mesh = describe(points), describe(cells)
         self.n_points, self.n_cells = len(points), len(cells)
-        self.entries = []                 # (group path, time, [(name, center, (shape, dtype))])
+        self.entries: list[XdmfEntry] = []      # (group path, time, [(name, center, (shape, dtype))])
         self.h5.flush()
         self._write_xdmf()
 
-    def write_step(self, step, t, point_data=None, cell_data=None):
+    def write_step(self, step: int, t: float, point_data: dict[str, np.ndarray] | None = None,
+                   cell_data: dict[str, np.ndarray] | None = None) -> None:
         grp = self.h5.create_group(f"steps/{int(step):06d}")
         grp.attrs["step"], grp.attrs["time"] = int(step), float(t)
         for center, data in (("Node", point_data or {}), ("Cell", cell_data or {})):
@@ -193,17 +205,17 @@ class XdmfSeries:
         self.h5.flush()
         self.append(step_entry(grp))
 
-    def append(self, entry):
+    def append(self, entry: XdmfEntry) -> None:
         """A step was written into ``NAME.h5`` (here or by pfault.io.parallel.ParallelSeries): list it."""
         self.entries.append(entry)
         self._write_xdmf()
 
-    def release(self):
+    def release(self) -> None:
         """Close ``NAME.h5`` so that every rank may open it to write the following steps (ParallelSeries);
         this object goes on listing them (``append``)."""
         self.close()
 
-    def copy_steps(self, h5_path, last_step):
+    def copy_steps(self, h5_path: str, last_step: int) -> None:
         """Copy the steps up to ``last_step`` of another run's series (same mesh) into this one (restart)."""
         with open_h5(h5_path, "r") as old:
             if old["mesh/points"].shape != (self.n_points, 3) or len(old["mesh/cells"]) != self.n_cells:
@@ -218,11 +230,11 @@ class XdmfSeries:
     def _write_xdmf(self):
         write_xdmf(self.directory, self.name, self.mesh, self.entries)
 
-    def moved(self, directory):
+    def moved(self, directory: str) -> None:
         """The run directory was renamed (the open HDF5 file moves with it)."""
         self.directory = directory
 
-    def close(self):
+    def close(self) -> None:
         if self.h5 is not None:
             self.h5.close()
             self.h5 = None
@@ -252,7 +264,7 @@ def _pid_alive(pid):
     return True
 
 
-def staging_dir(path):
+def staging_dir(path: str) -> str:
     """The hidden sibling ``.<name>.pfault-<host>-<pid>`` a run writes into before its first completed step;
     stale ones left by killed runs on this host (their process is gone) are removed."""
     parent, base = os.path.split(os.path.abspath(path))
@@ -275,7 +287,9 @@ class RunWriter:
     ``path`` is the output directory; the files go to a staging sibling until ``commit`` puts them in place
     (``self.dir`` is where they are now)."""
 
-    def __init__(self, path, points, cells, cell_material, material_names, fault_mesh=None, surface_mesh=None):
+    def __init__(self, path: str, points: np.ndarray, cells: np.ndarray, cell_material: np.ndarray,
+                 material_names: Sequence[str], fault_mesh: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                 surface_mesh: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.path = os.path.realpath(path)     # a symbolic link to a directory: the run goes where it points
         if os.path.exists(self.path) and not os.path.isdir(self.path):
             raise FileExistsError(f"{path} exists and is not a directory")
@@ -291,34 +305,36 @@ class RunWriter:
         if surface_mesh is not None:
             self.series["surface"] = XdmfSeries(self.dir, "surface", *surface_mesh)
 
-    def file(self, name):
+    def file(self, name: str) -> str:
         return os.path.join(self.dir, name)
 
-    def write_step(self, step, t, point_data, cell_data):
+    def write_step(self, step: int, t: float, point_data: dict[str, np.ndarray],
+                   cell_data: dict[str, np.ndarray]) -> None:
         cd = {"material": self.cell_material}
         cd.update(cell_data)
         self.series["fields"].write_step(step, t, point_data, cd)
 
-    def write_fault_step(self, step, t, data):
+    def write_fault_step(self, step: int, t: float, data: dict[str, np.ndarray]) -> None:
         cd = {"fault": self.fault_id}
         cd.update(data)
         self.series["fault"].write_step(step, t, None, cd)
 
-    def write_surface_step(self, step, t, point_data, cell_data):
+    def write_surface_step(self, step: int, t: float, point_data: dict[str, np.ndarray],
+                           cell_data: dict[str, np.ndarray]) -> None:
         self.series["surface"].write_step(step, t, point_data, cell_data)
 
-    def release(self, names):
+    def release(self, names: Iterable[str]) -> None:
         """The series ``names`` are written by every rank from now on (pfault.io.parallel): their HDF5 files
         are closed here and their steps come through ``add_steps``."""
         for name in names:
             self.series[name].release()
 
-    def add_steps(self, entries):
+    def add_steps(self, entries: dict[str, XdmfEntry]) -> None:
         """Steps written by every rank into released series: {series name: XDMF entry}."""
         for name, entry in entries.items():
             self.series[name].append(entry)
 
-    def continue_from(self, run_dir, last_step):
+    def continue_from(self, run_dir: str, last_step: int) -> None:
         """Restart: the output steps up to ``last_step`` of the run in ``run_dir`` start this run's series, and
         its checkpoint is this run's until this run writes one (a first step that fails leaves it)."""
         for name, series in self.series.items():
@@ -327,7 +343,7 @@ class RunWriter:
                 series.copy_steps(old, last_step)
         shutil.copyfile(os.path.join(run_dir, "checkpoint.h5"), self.file("checkpoint.h5"))
 
-    def write_metadata(self, options, argv):
+    def write_metadata(self, options: dict[str, Any], argv: Sequence[str]) -> None:
         lines = ["# resolved options of this run (command: %s)" % " ".join(argv)]
         for k in sorted(options):
             v = options[k]
@@ -336,17 +352,17 @@ class RunWriter:
         replace_json(self.file("versions.json"), package_versions())
         replace_json(self.file("materials.json"), {i: n for i, n in enumerate(self.material_names)})
 
-    def write_summary(self, summary):
+    def write_summary(self, summary: dict[str, Any]) -> None:
         replace_json(self.file("summary.json"), summary)
 
-    def write_failure(self, line, code, not_converged=False):
+    def write_failure(self, line: str, code: int, not_converged: bool = False) -> None:
         """A run that ends with an error after its directory was put in place: its summary.json (that of
         the last completed step) says so, with ``running`` false, the ``error`` line and the ``exit_code``
         (``converged`` false when a solve failed). Nothing before the commit: a previous result stays."""
         if self.committed:
             record_failure(self.dir, line, code, not_converged)
 
-    def commit(self):
+    def commit(self) -> None:
         """Put the staged run in place of the output directory (once, after the first completed step).
 
         Files of the old directory that pfault does not write (logs of a driver, notes) are moved into the
@@ -374,11 +390,11 @@ class RunWriter:
             series.moved(path)
         self.committed = True
 
-    def close(self):
+    def close(self) -> None:
         for series in self.series.values():
             series.close()
 
-    def abandon(self):
+    def abandon(self) -> None:
         """A run that ends before its first completed step: remove what it staged; the output directory
         (a previous result) is left as it was."""
         self.close()

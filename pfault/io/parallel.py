@@ -26,15 +26,23 @@ ranks (for tests that compare the two; not an option of pfault).
 from __future__ import annotations
 
 import os
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import PfaultError, run_on_all
 
+if TYPE_CHECKING:
+    import h5py
+    import numpy.typing as npt
+    from mpi4py import MPI
+
+    from .output import XdmfEntry
+
 GATHER_ENV = "PFAULT_GATHERED_OUTPUT"
 
 
-def available(comm):
+def available(comm: Any) -> bool:
     """Whether the series are written in parallel: more than one rank, h5py with MPI, and GATHER_ENV unset
     (the same answer on every rank; collective)."""
     from mpi4py import MPI
@@ -54,13 +62,13 @@ class Rows:
     in increasing order, ``take`` the index of each in this rank's array of values (``source``; default: the
     row's position in ``rows`` as given)."""
 
-    def __init__(self, rows, total, source=None):
+    def __init__(self, rows: np.ndarray, total: int, source: np.ndarray | None = None) -> None:
         rows = np.asarray(rows, dtype=np.int64)
         source = np.arange(len(rows)) if source is None else np.asarray(source, dtype=np.int64)
         order = np.argsort(rows, kind="stable")
         self.rows, self.take, self.total = rows[order], source[order], int(total)
 
-    def pick(self, values):
+    def pick(self, values: np.ndarray) -> np.ndarray:
         """This rank's values of its rows, in row order."""
         return np.ascontiguousarray(np.asarray(values)[self.take])
 
@@ -74,7 +82,7 @@ class Block:
     The values move in one MPI_Alltoallv of whole rows (a contiguous type of the row's bytes): mpi4py's
     pickling all-to-all took 29 ms for 192,000 x 9 doubles on 2 ranks where this takes 4 ms."""
 
-    def __init__(self, comm, rows):
+    def __init__(self, comm: MPI.Comm, rows: Rows) -> None:
         size, rank = comm.size, comm.rank
         per = -(-rows.total // size) if rows.total else 0
         self.start, self.stop = min(rank * per, rows.total), min((rank + 1) * per, rows.total)
@@ -85,7 +93,7 @@ class Block:
         self.send_counts = np.diff(np.concatenate([[0], self.send, [len(rows.rows)]])).astype(np.int64)
         self.recv_counts = np.array([len(g) for g in got], dtype=np.int64)
 
-    def gather(self, comm, values):
+    def gather(self, comm: MPI.Comm, values: np.ndarray) -> np.ndarray:
         """This rank's block of the dataset from every rank's values (in row order); collective."""
         from mpi4py import MPI
         values = np.ascontiguousarray(values)
@@ -109,7 +117,7 @@ def _starts(counts):
     return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
 
 
-def blocks(comm, name, rows):
+def blocks(comm: MPI.Comm, name: str, rows: dict[str, Rows]) -> dict[str, Block]:
     """{kind: Block} of the datasets ``name`` writes, from this rank's {kind: Rows}, once it is checked that the
     ranks' rows cover each kind's datasets once. Collective (mpi4py ``comm``)."""
     kinds = sorted(rows)
@@ -120,7 +128,7 @@ def blocks(comm, name, rows):
     return {k: Block(comm, rows[k]) for k in kinds}
 
 
-def open_file(comm, path, mode):
+def open_file(comm: MPI.Comm, path: str, mode: str) -> h5py.File:
     """``path`` opened by every rank of ``comm`` (mpi4py) with HDF5's MPI-IO driver, without HDF5's file lock
     where h5py offers that (pfault.io.output.open_h5). Collective."""
     import h5py
@@ -130,7 +138,7 @@ def open_file(comm, path, mode):
         return h5py.File(path, mode, driver="mpio", comm=comm)
 
 
-def create_dataset(group, name, shape, dtype):
+def create_dataset(group: h5py.Group, name: str, shape: tuple[int, ...], dtype: npt.DTypeLike) -> h5py.Dataset:
     """A dataset without fill values: every row is written (fill values would be written first, by all ranks
     together). Collective."""
     import h5py
@@ -139,7 +147,7 @@ def create_dataset(group, name, shape, dtype):
     return group.create_dataset(name, shape=shape, dtype=dtype, dcpl=dcpl)
 
 
-def write_block(ds, start, values):
+def write_block(ds: h5py.Dataset, start: int, values: np.ndarray) -> None:
     """Write ``values`` into the rows [start, start + len(values)) of ``ds`` (one hyperslab; independent)."""
     if len(values):
         ds[start:start + len(values)] = values
@@ -150,13 +158,14 @@ class ParallelSeries:
     with the MPI-IO driver on ``comm``; ``rows`` {"Node": Rows, "Cell": Rows} says which rows of each kind of
     dataset this rank writes. Every method is collective."""
 
-    def __init__(self, comm, directory, name, rows):
+    def __init__(self, comm: Any, directory: str, name: str, rows: dict[str, Rows]) -> None:
         self.comm = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
         self.name, self.rows = name, rows
         self.blocks = blocks(self.comm, name, rows)
         self.h5 = run_on_all(self.comm, open_file, self.comm, os.path.join(directory, name + ".h5"), "r+")
 
-    def write_step(self, step, t, point_data=None, cell_data=None):
+    def write_step(self, step: int, t: float, point_data: dict[str, np.ndarray] | None = None,
+                   cell_data: dict[str, np.ndarray] | None = None) -> XdmfEntry:
         """Write one step: arrays of this rank's values (local vertices or cells, as its Rows take them).
         Returns the step's XDMF entry (pfault.io.output.RunWriter.add_steps)."""
         data = [(center, key, self.blocks[center].gather(self.comm, self.rows[center].pick(value)))
@@ -195,7 +204,7 @@ class ParallelSeries:
         for ds, start, value in datasets:
             write_block(ds, start, value)
 
-    def close(self):
+    def close(self) -> None:
         if self.h5 is not None:
             h5, self.h5 = self.h5, None
             run_on_all(self.comm, h5.close)

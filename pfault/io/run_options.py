@@ -40,7 +40,7 @@ def _physical_options(options):
             and not any(pattern.match(k.lower()) for pattern, *_ in LOADING)}
 
 
-def read_run_options(run_dir):
+def read_run_options(run_dir: str) -> dict[str, str]:
     """The -pfault_* options of the run in ``run_dir`` (its options.txt), {name: value string}."""
     out = {}
     with open(os.path.join(run_dir, "options.txt")) as fh:
@@ -51,7 +51,8 @@ def read_run_options(run_dir):
     return out
 
 
-def loading_tables(options, water_density, gravity):
+def loading_tables(options: dict[str, str], water_density: float,
+                   gravity: float) -> dict[str, tuple[str, str, str, float, Table]]:
     """The loads a run's loading tables give, from its options ({name: value string}): {what it loads:
     (option, value string, unit, value when not given, Table in SI)}; a head drawdown as the pore-pressure
     change it gives (dp = -rho_w g h), so that the same load given either way is the same."""
@@ -62,12 +63,15 @@ def loading_tables(options, water_density, gravity):
             match = pattern.match(name)
             if match:
                 scale = -water_density * gravity if name.endswith("_head_drawdown") else 1.0
-                table = Table.from_pairs(parse_table(text, name, spec_for(name).unit), scale=scale)
+                spec = spec_for(name)
+                assert spec is not None          # every LOADING pattern is a declared option (SPECS)
+                table = Table.from_pairs(parse_table(text, name, spec.unit), scale=scale)
                 out[what.format(*match.groups())] = (name, text, unit, default, table)
     return out
 
 
-def check_loading(run_dir, theirs, mine, until, water_density, gravity):
+def check_loading(run_dir: str, theirs: dict[str, str], mine: dict[str, str], until: float, water_density: float,
+                  gravity: float) -> None:
     """InputError naming the first loading table whose load on [0, until] (up to the checkpoint's time)
     differs from that of the run in ``run_dir``: the checkpoint is the answer to that run's load up to then,
     so a continued run may change a table (extend it, alter the future load) only after it. ``theirs``,
@@ -76,7 +80,9 @@ def check_loading(run_dir, theirs, mine, until, water_density, gravity):
     b = loading_tables(mine, water_density, gravity)
     for what in sorted(set(a) | set(b)):
         old, new = a.get(what), b.get(what)
-        name, _, unit, default, _ = new or old
+        given = new or old
+        assert given is not None                 # ``what`` is a key of a or of b
+        name, _, unit, default, _ = given
         unloaded = Table((0.0,), (default,))
         diff = (new[4] if new else unloaded).first_difference(old[4] if old else unloaded, until)
         if diff is None:
@@ -90,7 +96,8 @@ def check_loading(run_dir, theirs, mine, until, water_density, gravity):
                          f"that run ({had}) up to it")
 
 
-def check_options(run_dir, options, until, water_density, gravity):
+def check_options(run_dir: str, options: dict[str, str], until: float, water_density: float,
+                  gravity: float) -> None:
     """InputError naming the first physical option (material, fault, boundary condition, mesh, geostatic
     state, flow) that differs from the run in ``run_dir`` or the first loading table that differs from its
     before ``until``, the checkpoint's time: a continued run equals the uninterrupted one only with the same

@@ -11,6 +11,7 @@ surface is 2-D and small, and only its vertices' displacements are gathered.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from ..errors import run_on_root
 from ..mesh import distributed
 from . import hazard
 from .parallel import ParallelSeries, Rows
+
+if TYPE_CHECKING:
+    from ..mesh.distributed import LocalMesh
 
 
 @dataclass
@@ -36,8 +40,9 @@ class StepOutput:
     face (None without faults); ``surface``: the land surface (pfault.io.hazard.Surface, rank 0; None
     elsewhere or when there is none). Every method is collective."""
 
-    def __init__(self, comm, mesh, writer, split_vertices, faces=None, fault_id=None, surface=None,
-                 parallel=False):
+    def __init__(self, comm: Any, mesh: LocalMesh, writer: Any, split_vertices: np.ndarray,
+                 faces: np.ndarray | None = None, fault_id: np.ndarray | None = None,
+                 surface: hazard.Surface | None = None, parallel: bool = False) -> None:
         self.comm, self.mpi = comm, comm.tompi4py()
         self.mesh, self.writer, self.surface = mesh, writer, surface
         self.split_vertices, self.faces = np.asarray(split_vertices, dtype=np.int64), faces
@@ -67,7 +72,7 @@ class StepOutput:
         for name, by_center in rows.items():
             self.series[name] = ParallelSeries(comm, directory, name, by_center)
 
-    def write(self, step, t, values):
+    def write(self, step: int, t: float, values: LocalStep) -> dict[str, float | list[float] | None] | None:
         """Write one step (LocalStep ``values``); returns the land surface's hazard maxima (every rank)."""
         write = self._write_parallel if self.parallel else self._write_gathered
         return self.mpi.bcast(write(step, t, values), root=0)
@@ -133,7 +138,7 @@ class StepOutput:
         self.writer.write_surface_step(step, t, {"displacement": u}, fields)
         return hazard.maxima(surf.points, surf.triangles, fields)
 
-    def close(self):
+    def close(self) -> None:
         for series in self.series.values():
             series.close()
         self.series = {}

@@ -21,7 +21,7 @@ EULER_GAMMA = 0.57721566490153286061
 
 
 # -- element matrices --------------------------------------------------------------------------
-def conductivity(grad, vol, k):
+def conductivity(grad: np.ndarray, vol: np.ndarray, k: float | np.ndarray) -> np.ndarray:
     """Element conductivity matrices (n,4,4): A_ab = V K g_a . g_b (gradients from tet_geometry)."""
     k = np.broadcast_to(np.asarray(k, float), vol.shape)
     return (vol * k)[:, None, None] * np.einsum("nai,nbi->nab", grad, grad)
@@ -31,7 +31,7 @@ _CONSISTENT = (np.ones((4, 4)) + np.eye(4)) / 20.0
 _LUMPED = np.eye(4) / 4.0
 
 
-def mass(vol, storage=1.0, lumped=False):
+def mass(vol: np.ndarray, storage: float | np.ndarray = 1.0, lumped: bool = False) -> np.ndarray:
     """Element storage (mass) matrices (n,4,4): consistent M_ab = S_s V (1 + delta_ab) / 20,
     or lumped M_ab = S_s V delta_ab / 4."""
     s = np.broadcast_to(np.asarray(storage, float), vol.shape)
@@ -39,14 +39,15 @@ def mass(vol, storage=1.0, lumped=False):
 
 
 # -- storage -------------------------------------------------------------------------------------
-def porosity(void_ratio):
+def porosity(void_ratio: float | np.ndarray) -> np.ndarray:
     """n = e / (1 + e)."""
     e = np.asarray(void_ratio, float)
     return e / (1.0 + e)
 
 
-def specific_storage(young, poisson, void_ratio, biot=1.0, water_density=1000.0, gravity=9.80665,
-                     water_compressibility=WATER_COMPRESSIBILITY):
+def specific_storage(young: float | np.ndarray, poisson: float | np.ndarray, void_ratio: float | np.ndarray,
+                     biot: float | np.ndarray = 1.0, water_density: float = 1000.0, gravity: float = 9.80665,
+                     water_compressibility: float = WATER_COMPRESSIBILITY) -> np.ndarray:
     """Specific storage (1/m) of a confined layer under oedometric (laterally confined) deformation:
 
         S_s = rho_w g (alpha c_M + n beta_w)
@@ -61,7 +62,9 @@ def specific_storage(young, poisson, void_ratio, biot=1.0, water_density=1000.0,
 
 
 # -- wells ---------------------------------------------------------------------------------------
-def vertical_line_in_tets(grad, vol, x0, xw, yw, z_bottom, z_top, side=(1, 1), tol=1e-10):
+def vertical_line_in_tets(grad: np.ndarray, vol: np.ndarray, x0: np.ndarray, xw: float, yw: float, z_bottom: float,
+                          z_top: float, side: tuple[int, int] = (1, 1),
+                          tol: float = 1e-10) -> tuple[np.ndarray, np.ndarray]:
     """Intersection of the vertical segment x = xw, y = yw, z_bottom <= z <= z_top with tetrahedra.
 
     grad, vol: from tet_geometry; x0: (n,3) coordinates of each tet's vertex 0.
@@ -105,7 +108,7 @@ def vertical_line_in_tets(grad, vol, x0, xw, yw, z_bottom, z_top, side=(1, 1), t
 
 
 # -- exponential integral and Theis --------------------------------------------------------------
-def exp_integral_e1(u):
+def exp_integral_e1(u: float | np.ndarray) -> np.ndarray:
     """Exponential integral E1(u) = int_u^inf exp(-s)/s ds for u > 0 (the Theis well function W(u)).
 
     Power series E1 = -gamma - ln u - sum_k (-u)^k / (k k!) for u < 1; for u >= 1 the continued
@@ -145,7 +148,7 @@ def exp_integral_e1(u):
     return out
 
 
-def theis_drawdown(r, t, Q, T, S):
+def theis_drawdown(r: float | np.ndarray, t: float | np.ndarray, Q: float, T: float, S: float) -> np.ndarray:
     """Theis drawdown s = Q / (4 pi T) W(u), u = r**2 S / (4 T t) (m, positive down) at distance r (m) and
     time t (s) after a well in an infinite confined aquifer started pumping Q (m**3/s); T = K b (m**2/s)
     is the transmissivity and S = S_s b the storativity."""

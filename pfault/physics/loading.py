@@ -6,6 +6,7 @@ drawdown tables are one source; a groundwater-flow model can supply another with
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,13 +19,14 @@ class Table:
     values: tuple
 
     @classmethod
-    def from_pairs(cls, pairs, scale=1.0):
+    def from_pairs(cls, pairs: Sequence[Sequence[float]], scale: float = 1.0) -> Table:
         return cls(tuple(p[0] for p in pairs), tuple(scale * p[1] for p in pairs))
 
-    def __call__(self, t):
+    def __call__(self, t: float) -> float:
         return float(np.interp(t, self.times, self.values))
 
-    def first_difference(self, other, until, rtol=1e-12):
+    def first_difference(self, other: Table, until: float,
+                         rtol: float = 1e-12) -> tuple[float, float, float] | None:
         """Where this table and ``other`` first differ on [0, until]: (t, this one's value, the other's) or
         None. Two piecewise-linear functions agree on an interval when they agree at its ends and at every
         breakpoint of either inside it; a difference within rtol of their largest magnitude there is
@@ -40,13 +42,13 @@ class Table:
 class MaterialDrawdown:
     """dp(t) uniform within each material, from per-material tables (None: no change)."""
 
-    def __init__(self, tables):
+    def __init__(self, tables: Iterable[Table | None]) -> None:
         self.tables = list(tables)  # index = material id
 
     @property
-    def active(self):
+    def active(self) -> bool:
         return any(t is not None for t in self.tables)
 
-    def cell_values(self, t, cell_material, centroids=None):
+    def cell_values(self, t: float, cell_material: np.ndarray, centroids: np.ndarray | None = None) -> np.ndarray:
         per_material = np.array([0.0 if tab is None else tab(t) for tab in self.tables])
         return per_material[cell_material]

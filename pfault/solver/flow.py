@@ -31,8 +31,9 @@ Discretisation
 
 from __future__ import annotations
 
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 from mpi4py import MPI
@@ -42,6 +43,12 @@ from ..errors import InputError
 from ..physics import flow as fl
 from ..physics.loading import Table
 from .setup import set_default
+
+if TYPE_CHECKING:
+    from ..mesh.distributed import LocalMesh
+    from ..mesh.serial import SerialMesh
+    from ..options import OptionReader
+    from ..scene import Material
 
 HEAD = "head"
 FIXED_HEAD_BIT = 8      # bit 3 of the vertex constraint mask (bits 0-2 are displacement components)
@@ -80,7 +87,8 @@ class FlowSettings:
 
 
 # -- options ---------------------------------------------------------------------------------------
-def read_flow_settings(reader, material_names, materials, surface_names, water_density, gravity):
+def read_flow_settings(reader: OptionReader, material_names: Sequence[str], materials: Sequence[Material],
+                       surface_names: Collection[str], water_density: float, gravity: float) -> FlowSettings:
     """Flow inputs from -pfault_ options (call only when -pfault_flow is true); same verdict on every rank."""
     cond, stor = [], []
     for name, m in zip(material_names, materials):
@@ -105,7 +113,7 @@ def read_flow_settings(reader, material_names, materials, surface_names, water_d
     xy = reader.get("pfault_flow_wells")
     screen = reader.get("pfault_flow_well_screen")
     rate = reader.get("pfault_flow_well_rate")
-    wells = ()
+    wells: tuple[Well, ...] = ()
     if xy:
         if len(xy) % 2:
             raise InputError("-pfault_flow_wells: give x,y pairs (x1,y1,x2,y2,... in m)")
@@ -127,7 +135,7 @@ def read_flow_settings(reader, material_names, materials, surface_names, water_d
     return FlowSettings(np.array(cond), np.array(stor), wells, surfaces, substeps)
 
 
-def fixed_head_vertices(serial, surface_names):
+def fixed_head_vertices(serial: SerialMesh, surface_names: Iterable[str]) -> np.ndarray:
     """(nv,) int 0/1 on the serial mesh (rank 0): vertices on the named physical surfaces."""
     mask = np.zeros(len(serial.points), np.int64)
     for name in surface_names:
@@ -151,8 +159,10 @@ class GroundwaterFlow:
     per step: time_s, dt_s, ksp_its, reason), ``dm`` / ``h`` (the head DM and global Vec), ``destroy()``.
     """
 
-    def __init__(self, mesh, conductivity, storage, wells=(), fixed_head=None, substeps=1,
-                 water_density=1000.0, gravity=9.80665, lumped_mass=False, prefix="flow_", t0=0.0):
+    def __init__(self, mesh: LocalMesh, conductivity: float | np.ndarray, storage: float | np.ndarray,
+                 wells: Iterable[Well | tuple] = (), fixed_head: np.ndarray | None = None, substeps: int = 1,
+                 water_density: float = 1000.0, gravity: float = 9.80665, lumped_mass: bool = False,
+                 prefix: str = "flow_", t0: float = 0.0) -> None:
         self.mesh = mesh
         self.comm = mesh.dm.getComm()
         self.wells = tuple(_as_well(w) for w in wells)
@@ -160,8 +170,8 @@ class GroundwaterFlow:
         self.rho_g = water_density * gravity
         self.prefix = prefix
         self.time = float(t0)
-        self.history = []
-        self._dt = None
+        self.history: list[dict[str, Any]] = []
+        self._dt: float | None = None
         self.log_assembly = PETSc.Log.Event("pfaultFlowAssemble")
         self.log_solve = PETSc.Log.Event("pfaultFlowSolve")
         nc, nv = len(mesh.cells), len(mesh.coords)
@@ -284,10 +294,10 @@ class GroundwaterFlow:
 
     # -- time stepping ---------------------------------------------------------------------------------
     @property
-    def active(self):
+    def active(self) -> bool:
         return len(self.wells) > 0
 
-    def step(self, dt):
+    def step(self, dt: float) -> None:
         """One backward-Euler step of length dt (s)."""
         if self._dt is None or abs(dt - self._dt) > 1e-12 * dt:
             self._set_dt(dt)
@@ -312,7 +322,7 @@ class GroundwaterFlow:
         self.h_local = lv.getArray().copy()
         self.dm.restoreLocalVec(lv)
 
-    def advance_to(self, t):
+    def advance_to(self, t: float) -> None:
         """Take ``substeps`` equal backward-Euler steps from the current time to t (nothing if t is reached)."""
         t = float(t)
         tol = 1e-12 * max(abs(t), abs(self.time), 1.0)
@@ -327,11 +337,11 @@ class GroundwaterFlow:
         self.time = t
 
     # -- outputs ----------------------------------------------------------------------------------------
-    def vertex_head(self):
+    def vertex_head(self) -> np.ndarray:
         """Head change h (m) at the local vertices (owned and ghost), at the current time."""
         return self.h_local.copy()
 
-    def restore(self, h_local, time, history=()):
+    def restore(self, h_local: np.ndarray, time: float, history: Iterable[dict[str, Any]] = ()) -> None:
         """Continue from a saved state (restart): head change h per local vertex (m, owned and ghost), the
         model time (s) and its step records."""
         self.h_local = np.array(h_local, dtype=float, copy=True)
@@ -342,12 +352,12 @@ class GroundwaterFlow:
         self.time = float(time)
         self.history = [dict(r) for r in history]
 
-    def cell_dp(self):
+    def cell_dp(self) -> np.ndarray:
         """Pore-pressure change dp = rho_w g h (Pa) per local cell at the model's current time (``time``); h is
         the cell average of the P1 head."""
         return self.rho_g * self.h_local[self.mesh.cells].mean(axis=1)
 
-    def destroy(self):
+    def destroy(self) -> None:
         for obj in [self.ksp, self.A, self.M, self.J, self.h, self.b, *self.well_loads, self.section, self.dm]:
             obj.destroy()
         self.well_loads = []
