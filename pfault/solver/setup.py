@@ -103,7 +103,7 @@ def apply_solver_defaults(linear=False, penalty=False):
         # 100 E/h: 120 of 144 slipping faces reversed their slip at every iteration, |F| flat at 4 % of the
         # load for 50 iterations, also in 2, 4 and 8 sub-steps (the first step of a proportional load from rest
         # is the same problem at every size). Backtracking on |F| converges there in 13 iterations; at 1e4 E/h
-        # on that mesh it does not either (the neighbourhood keeps shrinking; see README, penalty variant).
+        # on that mesh it does not either (the neighbourhood keeps shrinking; see docs/theory.md, "Penalty faces").
         set_default("snes_linesearch_type", "bt" if penalty else "basic")
     if not opts.hasName("pc_type"):
         set_default("pc_type", "lu")
