@@ -23,7 +23,7 @@ Problems (the error is relative, in the quantity named; ``h`` is the size measur
   (largest fault slip) against the finest mesh of the ladder (-pfault_mesh_size_factor); h = size factor.
 
 Axes: the mesh ladder of every problem; the solvers (a direct and an iterative one: ``--fault-solvers`` for
-fault scenes, ``--elastic-solvers`` for the fault-free ones; any name in config/solver); the nonlinear
+fault scenes, ``--elastic-solvers`` for the fault-free ones; names of pfault's solver files); the nonlinear
 tolerance (-snes_rtol, ``--rtols`` next to the code default 1e-10) on the fault problems; penalty faces at
 multiples of E/h (``--penalty``: E the harmonic mean of the two sides' moduli, h = sqrt of the median
 fault face area of the Lagrange run on the same mesh) against the Lagrange multipliers.
@@ -47,6 +47,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
+from importlib import resources
 
 import numpy as np
 
@@ -190,8 +191,9 @@ def mms_worker(argv):
 
 
 def elastic_solver_options(solver):
-    """PETSc options for a script that builds its own KSP: the solver's options file (and preonly for LU)."""
-    opts = ["-options_file", os.path.join(REPO, "config", "solver", f"{solver}.opts")]
+    """PETSc options for a script that builds its own KSP: pfault's solver file (package data; found here
+    without importing pfault.solver.setup, which would start PETSc in this driver), and preonly for LU."""
+    opts = ["-options_file", str(resources.files("pfault.solver").joinpath("options", f"{solver}.opts"))]
     return opts + (["-ksp_type", "preonly"] if solver == "mumps" else [])
 
 
@@ -682,7 +684,7 @@ def parse(argv):
     p.add_argument("--problems", type=names, default=PROBLEMS, help=f"comma list out of {','.join(PROBLEMS)}")
     p.add_argument("--ranks", type=int, default=2)
     p.add_argument("--fault-solvers", type=names, default=("mumps", "iterative"),
-                   help="solvers of the fault scenes (config/solver/NAME.opts); the first one also runs the "
+                   help="solvers of the fault scenes (-pfault_solver NAME); the first one also runs the "
                         "tolerance ladder")
     p.add_argument("--elastic-solvers", type=names, default=("mumps", "gamg"), help="solvers of fault-free scenes")
     p.add_argument("--rtols", type=floats, default=None, help="-snes_rtol values next to the default 1e-10")

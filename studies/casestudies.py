@@ -781,7 +781,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m studies.casestudies", description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated: " + ", ".join(CASES))
     ap.add_argument("--ranks", type=int, default=2)
-    ap.add_argument("--solver", default="mumps", help="a config/solver file name (default mumps)")
+    ap.add_argument("--solver", default="mumps", help="a -pfault_solver NAME (default mumps)")
     ap.add_argument("--size-factor", type=float, default=1.0, help="mesh size factor (default 1: paper size)")
     ap.add_argument("--no-run", action="store_true", help="only figures and README from existing runs")
     ap.add_argument("--no-readme", action="store_true", help="do not rewrite runs/README.md")

@@ -463,7 +463,7 @@ ITERATIVE = ("-pfault_solver", "iterative", "-ksp_rtol", "1e-12")
 @pytest.mark.parametrize("ranks", [1, 2])
 @pytest.mark.parametrize("case", ["stick", "slip", "open", "cohesion", "penalty", "slip_gamg"])
 def test_iterative_solver_reaches_the_direct_solution(runs, case, ranks):
-    """config/solver/iterative.opts (FGMRES, Schur fieldsplit with the multipliers eliminated first, BoomerAMG on
+    """-pfault_solver iterative (FGMRES, Schur fieldsplit with the multipliers eliminated first, BoomerAMG on
     the augmented displacement) gives the MUMPS answer (1e-8) in every state: stuck (the right block is held in
     x only through the fault), slipping, open, with cohesion, and with penalty faces (no multiplier field), with
     the same Newton iterations, in at most 40 Krylov iterations per Newton iteration (rtol 1e-12). GAMG chosen
