@@ -6,14 +6,14 @@ their finest mesh, over mesh size, solver, nonlinear tolerance and penalty stiff
     .venv/bin/python benchmarks/accuracy_cost.py [--quick] [--problems penny,two_blocks] [--report-only]
 
 Writes runs/accuracy_cost/report.md, error_vs_time.png and results.json. A thin wrapper of
-pfault.study.accuracy (see its docstring).
+studies/accuracy.py (see its docstring).
 """
 import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from pfault.study.accuracy import main  # noqa: E402
+from studies.accuracy import main  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(main())

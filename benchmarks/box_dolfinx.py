@@ -7,7 +7,7 @@ Same geometry (2000 m x 2000 m x 200 m, n x n x n hexahedra split into 6 tetrahe
 materials and load as config/demo.opts (clay above 40 m depth, sand to 140 m, rock below; one year of its
 drawdown as the pore-pressure change of the clay and the sand), rollers on the sides and the bottom fixed,
 P1 vector elements, the rigid-body modes as near-null space, and the KSP/PC options of pfault's solver file
-(config/solver/NAME.opts; of a fieldsplit file, the displacement split's, as pfault uses them without
+(-pfault_solver NAME; of a fieldsplit file, the displacement split's, as pfault uses them without
 faults). Prints the phases' wall times (mesh, stiffness assembly, solve) and the Krylov iterations as one
 line and one JSON line, like box_assembly.py.
 """
@@ -40,6 +40,7 @@ from dolfinx.fem.petsc import apply_lifting, assemble_matrix, assemble_vector, s
 
 sys.path.insert(0, ROOT)
 from pfault.optionsfile import read_options_file  # noqa: E402
+from pfault.solver.setup import find_solver_file  # noqa: E402
 
 comm = MPI.COMM_WORLD
 L, W, H = 2000.0, 2000.0, 200.0
@@ -125,7 +126,7 @@ def rigid_body_modes(V):
 
 A.setNearNullSpace(rigid_body_modes(V))
 opts = PETSc.Options()
-solver_file = os.path.join(ROOT, "config", "solver", a.solver + ".opts")
+solver_file = find_solver_file(a.solver)
 entries = [(e.name, e.value) for e in read_options_file(solver_file)]
 if ("pc_type", "fieldsplit") in entries:
     # pfault solves a scene without faults with the displacement split's options (configure_fieldsplit)

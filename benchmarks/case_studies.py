@@ -6,14 +6,14 @@
 
 Runs each case under mpirun (one at a time), makes its figures (runs/<run>/*.png) and rewrites
 runs/README.md: paper vs pfault, mesh sizes, wall times by stage, per-step Newton/Krylov/active-set figures.
-A thin wrapper of pfault.study.casestudies (see its docstring).
+A thin wrapper of studies/casestudies.py (see its docstring).
 """
 import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from pfault.study.casestudies import main  # noqa: E402
+from studies.casestudies import main  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -16,7 +16,6 @@ happens. A JSON line with every figure ends the output.
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 
@@ -26,23 +25,15 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
 from penny_mesh import crack_errors, make_penny_mesh, read_fault_step  # noqa: E402
-from pfault.study import mpi_env  # noqa: E402
+from studies.run import read_summary, run_captured  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "penny_crack.opts")
 
 
 def run_pfault(mesh, out, ranks, extra=()):
-    cmd = [sys.executable, "-m", "pfault", SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *extra]
-    if ranks > 1:
-        cmd = ["mpirun", "-n", str(ranks), "--oversubscribe"] + cmd
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=REPO, env=mpi_env(), capture_output=True, text=True)
-    wall = time.perf_counter() - t0
-    summary = None
-    if os.path.exists(os.path.join(out, "summary.json")):
-        with open(os.path.join(out, "summary.json")) as fh:
-            summary = json.load(fh)
-    return proc, summary, wall
+    proc = run_captured(["-m", "pfault", SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *extra], ranks)
+    return proc, read_summary(out), time.perf_counter() - t0
 
 
 def main(argv=None):

@@ -15,14 +15,13 @@ to OUT/report.md.
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from pfault.study import mpi_env  # noqa: E402
+from studies.run import read_summary, run_captured  # noqa: E402
 
 SCENE = "config/queretaro_calibrated.opts"
 MAXIMA = ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m")
@@ -31,18 +30,17 @@ MAXIMA = ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m")
 def run(size_factor, solver, ranks, out, extra):
     """One run; returns its row (or the failure)."""
     path = os.path.join(out, f"sf{size_factor:g}_{solver}")
-    cmd = ["mpirun", "-n", str(ranks), sys.executable, "-m", "pfault", SCENE, "-pfault_mesh_size_factor",
-           f"{size_factor:g}", "-pfault_solver", solver, "-pfault_output_dir", path, "-pfault_figures", "false",
-           *extra]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=ROOT, env=mpi_env(oversubscribe=True), capture_output=True, text=True)
+    proc = run_captured(["-m", "pfault", SCENE, "-pfault_mesh_size_factor", f"{size_factor:g}", "-pfault_solver",
+                         solver, "-pfault_output_dir", path, "-pfault_figures", "false", *extra], ranks)
     wall = time.perf_counter() - t0
     row = {"size_factor": size_factor, "solver": solver, "ranks": ranks, "end_to_end_s": wall,
            "exit_code": proc.returncode}
     try:
-        with open(os.path.join(path, "summary.json")) as fh:
-            s = json.load(fh)
-    except (OSError, ValueError):
+        s = read_summary(path)
+    except ValueError:
+        s = None
+    if s is None:
         row["error"] = (proc.stderr.strip().splitlines() or ["no output"])[-1]
         return row
     steps = [r for r in s["steps"] if not r.get("initial")]

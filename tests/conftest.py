@@ -1,15 +1,20 @@
-"""Shared helpers: run pfault (or a script) on 1 rank directly or on N ranks under mpirun, with timeouts."""
+"""Shared helpers: run pfault (or a script) on 1 rank directly or on N ranks under mpirun, with timeouts.
+
+They are studies/run.py's: the repository root goes first on the import path so that the tests import the
+studies (studies/) beside the package."""
 
 import json
 import os
-import subprocess
 import sys
 
 import pytest
 
-from pfault.study import mpi_env as study_mpi_env
-
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
+
+from studies.run import command, read_summary, run_captured  # noqa: E402,F401  (command: tests that start runs)
+from studies.run import mpi_env as study_mpi_env  # noqa: E402
+
 PY = sys.executable
 TIMEOUT = 600
 
@@ -18,16 +23,8 @@ def mpi_env():
     return study_mpi_env(oversubscribe=True)
 
 
-def command(args, ranks):
-    """Serial runs use plain python; parallel runs use mpirun (oversubscribed beyond the cores)."""
-    if ranks == 1:
-        return [PY] + args
-    return ["mpirun", "-n", str(ranks), "--oversubscribe", PY] + args
-
-
 def run(args, ranks=1, timeout=TIMEOUT, check=True):
-    proc = subprocess.run(command(args, ranks), cwd=REPO, env=mpi_env(), capture_output=True, text=True,
-                          timeout=timeout)
+    proc = run_captured(args, ranks, timeout=timeout, env=mpi_env())
     if check and proc.returncode != 0:
         raise AssertionError(f"{' '.join(args)} on {ranks} rank(s) exited {proc.returncode}\n"
                              f"stdout:\n{proc.stdout[-4000:]}\nstderr:\n{proc.stderr[-4000:]}")
@@ -39,12 +36,7 @@ def run_scene(scene, outdir, ranks=1, extra=(), check=True):
     figures = [] if "-pfault_figures" in extra else ["-pfault_figures", "false"]
     proc = run(["-m", "pfault", scene, "-pfault_output_dir", str(outdir), *figures, *extra], ranks=ranks,
                check=check)
-    summary = None
-    path = os.path.join(str(outdir), "summary.json")
-    if os.path.exists(path):
-        with open(path) as fh:
-            summary = json.load(fh)
-    return proc, summary
+    return proc, read_summary(outdir)
 
 
 def run_script(script, ranks=1, args=()):

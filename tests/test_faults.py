@@ -219,7 +219,7 @@ def test_fault_pore_pressure_clamped_above_the_lowered_water_table(runs, ranks, 
     """t_N,eff - t_N = alpha p with p = rho_w g (-z - drawdown) at the face centroid (alpha = 1): clamped at 0 by
     default (faces at z = -1/6, -1/3 lie above the lowered water table at z = -0.5: dry), negative with
     -pfault_contact_suction true; the faces below (z = -2/3, -5/6) carry p > 0 either way."""
-    from pfault.study import figures as fg
+    from pfault.io import figures as fg
     s, f, out = runs("water_table", ranks, ["-pfault_contact_suction", "true" if suction else "false"])
     assert s["converged"]
     fault = fg.read_fault(str(out))
@@ -463,7 +463,7 @@ ITERATIVE = ("-pfault_solver", "iterative", "-ksp_rtol", "1e-12")
 @pytest.mark.parametrize("ranks", [1, 2])
 @pytest.mark.parametrize("case", ["stick", "slip", "open", "cohesion", "penalty", "slip_gamg"])
 def test_iterative_solver_reaches_the_direct_solution(runs, case, ranks):
-    """config/solver/iterative.opts (FGMRES, Schur fieldsplit with the multipliers eliminated first, BoomerAMG on
+    """-pfault_solver iterative (FGMRES, Schur fieldsplit with the multipliers eliminated first, BoomerAMG on
     the augmented displacement) gives the MUMPS answer (1e-8) in every state: stuck (the right block is held in
     x only through the fault), slipping, open, with cohesion, and with penalty faces (no multiplier field), with
     the same Newton iterations, in at most 40 Krylov iterations per Newton iteration (rtol 1e-12). GAMG chosen

@@ -13,7 +13,7 @@ import subprocess
 import pytest
 
 from conftest import PY, REPO, mpi_env
-from pfault.study import hard_cases as hc
+from studies import hard_cases as hc
 
 pytestmark = pytest.mark.mpi               # runs under mpirun; part of the default suite (scripts/test.sh)
 TIMEOUT = 900                              # seconds for the whole quick study: a hung run fails the test

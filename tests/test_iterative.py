@@ -1,4 +1,4 @@
-"""The iterative fault solver (config/solver/iterative.opts) against MUMPS on scenes beyond the two blocks: the
+"""The iterative fault solver (-pfault_solver iterative) against MUMPS on scenes beyond the two blocks: the
 fissure box (a fissure that opens above a stiff step, faces stuck, slipping and open in one step) and the
 calibrated Queretaro scene on a coarse mesh (groundwater flow, geostatic start, a fault that starts to slip).
 Both solvers must take the same Newton iterations and give the same fault fields and displacements to 1e-8 of

@@ -2,7 +2,7 @@
 
 A run writes them at its end (``-pfault_figures``, default true; pfault.simulation), and
 
-    python -m pfault.study.figures RUN_DIR [RUN_DIR ...] [--step K]
+    python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]
 
 writes them into any RUN_DIR (an interrupted run's too):
 
@@ -22,8 +22,8 @@ writes them into any RUN_DIR (an interrupted run's too):
 Each PNG is written whole into ``NAME.png.tmp`` and renamed over the old one.
 
 ``K`` is the index of the output time (default -1: the last one). The readers below (``read_summary``,
-``read_fields``, ``read_fault``, ``top_surface``, ...) are also used by pfault.study.casestudies and the
-tests; they read the files pfault.io.output writes and need meshio only.
+``read_fields``, ``read_fault``, ``top_surface``, ...) are also used by the case studies (studies/casestudies.py)
+and the tests; they read the files pfault.io.output writes and need meshio only.
 
 Sign conventions (pfault.mesh.fault): a fault triangle's vertex order gives the normal (x1-x0)x(x2-x0) from
 the minus to the plus side; jumps are plus minus minus; opening is the normal jump (positive: open); the
@@ -584,5 +584,30 @@ def write_run_figures(run_dir: str) -> list[str]:
         return make_figures(run_dir)
     except Exception as exc:          # noqa: BLE001 (plotting must not turn a finished run into a failure)
         sys.stderr.write(f"pfault: warning: figures not written ({type(exc).__name__}: {exc}); "
-                         f"python -m pfault.study.figures {run_dir} makes them\n")
+                         f"python -m pfault.io.figures {run_dir} makes them\n")
         return []
+
+
+def main(argv=None):
+    """``python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]``: the figures of each run directory; exit
+    code 1 when one is not a pfault run directory."""
+    import argparse
+    import sys
+    ap = argparse.ArgumentParser(prog="python -m pfault.io.figures", description=__doc__.splitlines()[0],
+                                 epilog=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="a pfault output directory")
+    ap.add_argument("--step", type=int, default=-1, help="output time index (default -1: the last)")
+    args = ap.parse_args(argv)
+    status = 0
+    for d in args.run_dirs:
+        if not os.path.exists(os.path.join(d, "summary.json")):
+            sys.stderr.write(f"figures: {d}: no summary.json (not a pfault run directory)\n")
+            status = 1
+            continue
+        for p in make_figures(d, args.step):
+            print(p)
+    return status
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

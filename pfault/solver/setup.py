@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from importlib import resources
 
 import numpy as np
 from petsc4py import PETSc
@@ -28,16 +29,21 @@ def read_options_file(path):
 
 
 def find_solver_file(name, scene_file=""):
+    """The options file of ``-pfault_solver NAME``: NAME itself when it is a file, else ``solver/NAME.opts``
+    beside the scene (a user's own solver file), else pfault's own ``NAME.opts`` (package data in
+    pfault/solver/options, found through importlib.resources wherever pfault is installed)."""
     if os.path.isfile(name):
         return name
-    here = os.path.dirname(os.path.abspath(__file__))
-    candidates = [os.path.join(os.path.dirname(scene_file or "."), "solver", name + ".opts"),
-                  os.path.join("config", "solver", name + ".opts"),
-                  os.path.join(here, "..", "..", "config", "solver", name + ".opts")]
-    for c in candidates:
-        if os.path.isfile(c):
-            return os.path.normpath(c)
-    raise InputError(f"-pfault_solver {name}: no file {name}.opts in config/solver and no such path")
+    if scene_file:
+        own = os.path.join(os.path.dirname(scene_file), "solver", name + ".opts")
+        if os.path.isfile(own):
+            return os.path.normpath(own)
+    packaged = resources.files("pfault.solver").joinpath("options")
+    if packaged.joinpath(name + ".opts").is_file():
+        return str(packaged.joinpath(name + ".opts"))
+    known = sorted(f.name.removesuffix(".opts") for f in packaged.iterdir() if f.name.endswith(".opts"))
+    raise InputError(f"-pfault_solver {name}: not a file, not solver/{name}.opts beside the scene, not one of "
+                     f"pfault's solvers ({', '.join(known)})")
 
 
 def apply_solver_file(name, scene_file=""):

@@ -23,7 +23,7 @@ Problems (the error is relative, in the quantity named; ``h`` is the size measur
   (largest fault slip) against the finest mesh of the ladder (-pfault_mesh_size_factor); h = size factor.
 
 Axes: the mesh ladder of every problem; the solvers (a direct and an iterative one: ``--fault-solvers`` for
-fault scenes, ``--elastic-solvers`` for the fault-free ones; any name in config/solver); the nonlinear
+fault scenes, ``--elastic-solvers`` for the fault-free ones; names of pfault's solver files); the nonlinear
 tolerance (-snes_rtol, ``--rtols`` next to the code default 1e-10) on the fault problems; penalty faces at
 multiples of E/h (``--penalty``: E the harmonic mean of the two sides' moduli, h = sqrt of the median
 fault face area of the Lagrange run on the same mesh) against the Lagrange multipliers.
@@ -47,12 +47,12 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
+from importlib import resources
 
 import numpy as np
 
-from . import mpi_env
+from .run import REPO, cpu_model, read_summary, run_logged
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SCRIPTS = os.path.join(REPO, "tests", "scripts")
 LEVELS = (0.10, 0.05, 0.01)             # error levels of the "cheapest setting" table
 DEFAULT_RTOL = 1e-10                    # pfault's -snes_rtol default
@@ -119,43 +119,9 @@ class Study:
 # ------------------------------------------------------------------------------------------------------
 # running
 # ------------------------------------------------------------------------------------------------------
-@dataclass
-class Done:
-    code: int
-    wall: float
-    load: float
-    stdout: str
-    command: str
-
-
 def run_command(args, rundir, ranks, timeout=TIMEOUT):
-    """Runs ``python ARGS`` (under mpirun for ranks > 1) from the repository root, logging to rundir/stdout.txt;
-    the 1-minute load average is sampled every 2 s."""
-    os.makedirs(rundir, exist_ok=True)
-    cmd = [sys.executable, *map(str, args)]
-    if ranks > 1:
-        cmd = ["mpirun", "-n", str(ranks)] + cmd
-    shown = " ".join(cmd).replace(sys.executable, ".venv/bin/python").replace(REPO + os.sep, "")
-    loads = [os.getloadavg()[0]]
-    t0 = time.perf_counter()
-    log_path = os.path.join(rundir, "stdout.txt")
-    with open(log_path, "w") as log:
-        proc = subprocess.Popen(cmd, cwd=REPO, env=mpi_env(oversubscribe=ranks > 2), stdout=log,
-                                stderr=subprocess.STDOUT, text=True)
-        while True:
-            try:
-                code = proc.wait(timeout=2.0)
-                break
-            except subprocess.TimeoutExpired:
-                loads.append(os.getloadavg()[0])
-                if time.perf_counter() - t0 > timeout:
-                    proc.kill()
-                    code = proc.wait()
-                    break
-    wall = time.perf_counter() - t0
-    with open(log_path) as fh:
-        out = fh.read()
-    return Done(code, wall, float(np.mean(loads)), out, shown)
+    """Runs ``python ARGS`` (under mpirun for ranks > 1) from the repository root, logging to rundir/stdout.txt."""
+    return run_logged(args, ranks, os.path.join(rundir, "stdout.txt"), timeout)
 
 
 def run_pfault(study, problem, name, scene, extra=()):
@@ -166,10 +132,7 @@ def run_pfault(study, problem, name, scene, extra=()):
         os.remove(path)
     done = run_command(["-m", "pfault", scene, "-pfault_output_dir", rundir, *extra], rundir, study.ranks,
                        study.timeout)
-    summary = None
-    if os.path.exists(path):
-        with open(path) as fh:
-            summary = json.load(fh)
+    summary = read_summary(rundir)
     print(f"accuracy: {problem}/{name}: exit {done.code}, {done.wall:.1f} s (load {done.load:.1f})", flush=True)
     return done, summary, rundir
 
@@ -228,8 +191,9 @@ def mms_worker(argv):
 
 
 def elastic_solver_options(solver):
-    """PETSc options for a script that builds its own KSP: the solver's options file (and preonly for LU)."""
-    opts = ["-options_file", os.path.join(REPO, "config", "solver", f"{solver}.opts")]
+    """PETSc options for a script that builds its own KSP: pfault's solver file (package data; found here
+    without importing pfault.solver.setup, which would start PETSc in this driver), and preonly for LU."""
+    opts = ["-options_file", str(resources.files("pfault.solver").joinpath("options", f"{solver}.opts"))]
     return opts + (["-ksp_type", "preonly"] if solver == "mumps" else [])
 
 
@@ -238,14 +202,14 @@ def study_mms(study, ladder):
     for solver in study.elastic_solvers:
         for n in ladder["levels"]:
             rundir = os.path.join(study.out, "mms", f"{solver}-n{n}")
-            done = run_command(["-m", "pfault.study.accuracy", "mms-worker", n, *elastic_solver_options(solver)],
+            done = run_command(["-m", "studies.accuracy", "mms-worker", n, *elastic_solver_options(solver)],
                                rundir, study.ranks, study.timeout)
             print(f"accuracy: mms/{solver}-n{n}: exit {done.code}, {done.wall:.1f} s (load {done.load:.1f})",
                   flush=True)
             row = Row("mms", solver, n, 1.0 / n, 3 * (n + 1) ** 3, None, wall_s=done.wall, load=done.load,
                       command=done.command)
-            its = [int(m) for m in re.findall(r"Linear solve converged due to \S+ iterations (\d+)", done.stdout)]
-            found = [json.loads(s) for s in done.stdout.splitlines() if s.startswith("{")]
+            its = [int(m) for m in re.findall(r"Linear solve converged due to \S+ iterations (\d+)", done.output)]
+            found = [json.loads(s) for s in done.output.splitlines() if s.startswith("{")]
             if done.code != 0 or not found or not its:
                 row.ok, row.note = False, f"exit code {done.code}" + ("" if its else ", linear solve not converged")
             else:
@@ -285,7 +249,7 @@ def study_theis(study, ladder):
                   flush=True)
             row = Row("theis", solver, n, float("nan"), 2 * (n + 1) ** 2, None, wall_s=done.wall, load=done.load,
                       command=done.command)
-            found = [json.loads(s) for s in done.stdout.splitlines() if s.startswith("{")]
+            found = [json.loads(s) for s in done.output.splitlines() if s.startswith("{")]
             if done.code != 0 or not found:
                 row.ok, row.note = False, f"exit code {done.code}"
             else:
@@ -705,17 +669,6 @@ def git_hash():
         return "unknown"
 
 
-def cpu_model():
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
-
-
 def floats(text):
     return tuple(float(v) for v in text.split(",") if v)
 
@@ -731,7 +684,7 @@ def parse(argv):
     p.add_argument("--problems", type=names, default=PROBLEMS, help=f"comma list out of {','.join(PROBLEMS)}")
     p.add_argument("--ranks", type=int, default=2)
     p.add_argument("--fault-solvers", type=names, default=("mumps", "iterative"),
-                   help="solvers of the fault scenes (config/solver/NAME.opts); the first one also runs the "
+                   help="solvers of the fault scenes (-pfault_solver NAME); the first one also runs the "
                         "tolerance ladder")
     p.add_argument("--elastic-solvers", type=names, default=("mumps", "gamg"), help="solvers of fault-free scenes")
     p.add_argument("--rtols", type=floats, default=None, help="-snes_rtol values next to the default 1e-10")

@@ -1,9 +1,9 @@
 """The two case studies of Franceschini et al. (Proc. IAHS 372, 63-68, 2015) against the paper.
 
-    .venv/bin/python -m pfault.study.casestudies                 # run all, figures, rewrite runs/README.md
-    .venv/bin/python -m pfault.study.casestudies --no-run        # figures + README from the existing runs
-    .venv/bin/python -m pfault.study.casestudies --cases wuxi --solver iterative   # a solver variant
-    .venv/bin/python -m pfault.study.casestudies --cases wuxi --tag lag -- -snes_lag_preconditioner 100
+    .venv/bin/python -m studies.casestudies                 # run all, figures, rewrite runs/README.md
+    .venv/bin/python -m studies.casestudies --no-run        # figures + README from the existing runs
+    .venv/bin/python -m studies.casestudies --cases wuxi --solver iterative   # a solver variant
+    .venv/bin/python -m studies.casestudies --cases wuxi --tag lag -- -snes_lag_preconditioner 100
 
 Each case runs as ``mpirun -n RANKS python -m pfault config/<case>.opts -pfault_output_dir runs/<run>
 -log_view :runs/<run>/log_view.txt -pfault_contact_monitor [options after --]`` (one at a time: the
@@ -11,7 +11,7 @@ reference machine has 2 cores), with stdout in ``runs/<run>/stdout.txt`` and the
 (command, exit code, end-to-end wall time including MPI start-up and imports, CPU time, load average
 during the run) in ``runs/<run>/casestudy.json``. ``<run>`` is the case name, suffixed ``-<tag>``,
 ``-<solver>`` for a solver other than mumps and ``-f<factor>`` for a mesh size factor other than 1. Then
-the figures of pfault.study.figures are written into each run directory and ``runs/README.md`` is
+the figures of pfault.io.figures are written into each run directory and ``runs/README.md`` is
 regenerated from every run directory found.
 
 The paper's figures are the ones quoted in its text (nothing digitised from its plots): where it gives a
@@ -23,20 +23,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import re
-import resource
-import shlex
-import subprocess
 import sys
 import time
 
-import numpy as np
+from pfault.io import figures as fg
 
-from . import figures as fg
-from . import mpi_env
+from .run import REPO, command, cpu_model, run_logged, shown
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 CASES = {
     "wuxi": "config/wuxi.opts",
     "queretaro": "config/queretaro.opts",
@@ -80,65 +74,35 @@ def run_name(case, solver="mumps", size_factor=1.0, tag=""):
 # ------------------------------------------------------------------------------------------------------
 # running
 # ------------------------------------------------------------------------------------------------------
-def run_case(case, ranks=2, solver="mumps", size_factor=1.0, extra=(), timeout=7200, python=None,
-             runs_dir="runs", tag=""):
+def run_case(case, ranks=2, solver="mumps", size_factor=1.0, extra=(), timeout=7200, runs_dir="runs", tag=""):
     """Runs one case under mpirun from the repository root; returns the driver record (also written to
     runs/<run>/casestudy.json)."""
     name = run_name(case, solver, size_factor, tag)
     out = os.path.join(runs_dir, name)
     os.makedirs(os.path.join(REPO, out), exist_ok=True)
-    python = python or sys.executable
     args = [CASES[case], "-pfault_output_dir", out, "-log_view", f":{out}/log_view.txt", "-pfault_contact_monitor"]
     if solver != "mumps":
         args += ["-pfault_solver", solver]
     if float(size_factor) != 1.0:
         args += ["-pfault_mesh_size_factor", f"{float(size_factor):g}"]
     args += CASE_OPTIONS.get(case, []) + list(extra)
-    cmd = ["mpirun", "-n", str(ranks), python, "-m", "pfault"] + args
-    shown = " ".join(["mpirun", "-n", str(ranks), ".venv/bin/python", "-m", "pfault"] + [shlex.quote(a) for a in args])
-    print(f"case studies: {name}: {shown}", flush=True)
+    print(f"case studies: {name}: {shown(command(['-m', 'pfault', *args], ranks))}", flush=True)
     for stale in ("summary.json", "casestudy.json"):
         path = os.path.join(REPO, out, stale)
         if os.path.exists(path):
             os.remove(path)
-    loads = [os.getloadavg()[0]]
-    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    with open(os.path.join(REPO, out, "stdout.txt"), "w") as log:
-        proc = subprocess.Popen(cmd, cwd=REPO, env=mpi_env(), stdout=log, stderr=subprocess.STDOUT)
-        while True:
-            try:
-                rc = proc.wait(timeout=5.0)
-                break
-            except subprocess.TimeoutExpired:
-                loads.append(os.getloadavg()[0])
-                if time.perf_counter() - t0 > timeout:
-                    proc.kill()
-                    rc = proc.wait()
-                    break
-    wall = time.perf_counter() - t0
-    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
-    rec = {"case": case, "run": name, "tag": tag, "extra": list(extra), "command": shown, "ranks": ranks, "solver": solver,
-           "size_factor": float(size_factor), "exit_code": rc, "wall_end_to_end_s": wall, "cpu_s": cpu,
-           "load_avg_1min_mean": float(np.mean(loads)), "load_avg_1min_max": float(np.max(loads)),
-           "date": time.strftime("%Y-%m-%d %H:%M"), "host_cpus": os.cpu_count(), "cpu_model": _cpu_model()}
+    done = run_logged(["-m", "pfault", *args], ranks, os.path.join(REPO, out, "stdout.txt"), timeout)
+    rec = {"case": case, "run": name, "tag": tag, "extra": list(extra), "command": done.command, "ranks": ranks,
+           "solver": solver, "size_factor": float(size_factor), "exit_code": done.code,
+           "wall_end_to_end_s": done.wall, "cpu_s": done.cpu, "load_avg_1min_mean": done.load,
+           "load_avg_1min_max": max(done.loads), "date": time.strftime("%Y-%m-%d %H:%M"),
+           "host_cpus": os.cpu_count(), "cpu_model": cpu_model()}
     with open(os.path.join(REPO, out, "casestudy.json"), "w") as fh:
         json.dump(rec, fh, indent=2)
-    status = "done" if rc == 0 else f"EXIT {rc}"
-    print(f"case studies: {name}: {status} in {wall:.1f} s (mean load {rec['load_avg_1min_mean']:.2f})", flush=True)
+    status = "done" if done.code == 0 else f"EXIT {done.code}"
+    print(f"case studies: {name}: {status} in {done.wall:.1f} s (mean load {rec['load_avg_1min_mean']:.2f})",
+          flush=True)
     return rec
-
-
-def _cpu_model():
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "?"
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -724,7 +688,7 @@ def write_readme(results, path, regenerate_cmd):
         "# runs",
         "",
         "Output of runs lands here (`runs/<run>/`); only this README is committed. It is written by "
-        "`pfault/study/casestudies.py`; regenerate runs, figures and this file with",
+        "`studies/casestudies.py`; regenerate runs, figures and this file with",
         "",
         "```bash",
         regenerate_cmd,
@@ -814,10 +778,10 @@ def all_results(runs_dir):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m pfault.study.casestudies", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m studies.casestudies", description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated: " + ", ".join(CASES))
     ap.add_argument("--ranks", type=int, default=2)
-    ap.add_argument("--solver", default="mumps", help="a config/solver file name (default mumps)")
+    ap.add_argument("--solver", default="mumps", help="a -pfault_solver NAME (default mumps)")
     ap.add_argument("--size-factor", type=float, default=1.0, help="mesh size factor (default 1: paper size)")
     ap.add_argument("--no-run", action="store_true", help="only figures and README from existing runs")
     ap.add_argument("--no-readme", action="store_true", help="do not rewrite runs/README.md")

@@ -28,8 +28,6 @@ import argparse
 import json
 import math
 import os
-import shlex
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -37,9 +35,8 @@ from typing import Callable
 
 import numpy as np
 
-from . import mpi_env
+from .run import REPO, command, cpu_model, read_summary, run_captured, run_logged, shown
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 RUNS_DIR = os.path.join("runs", "hard_cases")
 EXIT_OK, EXIT_FAILED = 0, 1
 
@@ -111,7 +108,7 @@ class RunResult:
                 and all(s["converged"] for s in self.steps))
 
     def fault(self, step=-1):
-        from . import figures as fg
+        from pfault.io import figures as fg
         return fg.read_fault(self.dir, step)
 
 
@@ -178,7 +175,7 @@ def path_independence(ref, tol=1e-6):
 def reopening(t_open, t_closed, t_reopen, tol=0.05, closed_share=0.2):
     """Load cycle (times in years): the fissure open at t_open closes at t_closed (at most ``closed_share`` of the
     open faces stay open) and reopens at t_reopen to the opening field of t_open (relative difference)."""
-    from . import figures as fg
+    from pfault.io import figures as fg
 
     def evaluate(res, runs):
         snaps = {}
@@ -453,11 +450,7 @@ def select(all_cases, quick=False, names=None):
 # ------------------------------------------------------------------------------------------------------
 # running
 # ------------------------------------------------------------------------------------------------------
-def _mpirun(ranks):
-    return ["mpirun", "-n", str(ranks)] + (["--oversubscribe"] if ranks > 2 else [])
-
-
-def run_case(case, runs_dir, timeout=1800.0, python=None):
+def run_case(case, runs_dir, timeout=1800.0):
     """Runs one case under mpirun from the repository root; returns the driver record (also written to
     <runs_dir>/<case>/hardcase.json)."""
     out = os.path.join(runs_dir, case.name)
@@ -465,47 +458,37 @@ def run_case(case, runs_dir, timeout=1800.0, python=None):
     for stale in ("summary.json", "hardcase.json"):
         if os.path.exists(os.path.join(REPO, out, stale)):
             os.remove(os.path.join(REPO, out, stale))
-    python = python or sys.executable
-    cmd = _mpirun(case.ranks) + [python, "-m", "pfault"] + case.args(out)
-    shown = " ".join(_mpirun(case.ranks) + [".venv/bin/python", "-m", "pfault"]
-                     + [shlex.quote(a) for a in case.args(out)])
-    print(f"hard cases: {case.name}: {shown}", flush=True)
-    t0 = time.perf_counter()
-    with open(os.path.join(REPO, out, "stdout.txt"), "w") as log:
-        try:
-            rc = subprocess.run(cmd, cwd=REPO, env=mpi_env(oversubscribe=case.ranks > 2), stdout=log,
-                                stderr=subprocess.STDOUT, timeout=timeout).returncode
-        except subprocess.TimeoutExpired:
-            rc = "timeout"
-    rec = {"case": case.name, "command": shown, "ranks": case.ranks, "exit_code": rc,
-           "wall_end_to_end_s": time.perf_counter() - t0, "load_avg_1min_after": os.getloadavg()[0],
+    args = ["-m", "pfault", *case.args(out)]
+    print(f"hard cases: {case.name}: {shown(command(args, case.ranks))}", flush=True)
+    done = run_logged(args, case.ranks, os.path.join(REPO, out, "stdout.txt"), timeout)
+    rc = "timeout" if done.timed_out else done.code
+    rec = {"case": case.name, "command": done.command, "ranks": case.ranks, "exit_code": rc,
+           "wall_end_to_end_s": done.wall, "load_avg_1min_after": os.getloadavg()[0],
            "date": time.strftime("%Y-%m-%d %H:%M")}
     if case.faces_per_rank:
-        rec["faces_per_rank"] = count_faces_per_rank(case, python)
+        rec["faces_per_rank"] = count_faces_per_rank(case)
     with open(os.path.join(REPO, out, "hardcase.json"), "w") as fh:
         json.dump(rec, fh, indent=2)
     print(f"hard cases: {case.name}: exit {rc} in {rec['wall_end_to_end_s']:.1f} s", flush=True)
     return rec
 
 
-def count_faces_per_rank(case, python):
+def count_faces_per_rank(case):
     """Fault faces each rank owns in the case's scene and rank count (set-up only, no solve)."""
-    cmd = _mpirun(case.ranks) + [python, "-m", "pfault.study.hard_cases", "--faces-per-rank", case.scene,
-                                 *case.options]
-    proc = subprocess.run(cmd, cwd=REPO, env=mpi_env(oversubscribe=case.ranks > 2), capture_output=True,
-                          text=True, timeout=600)
+    proc = run_captured(["-m", "studies.hard_cases", "--faces-per-rank", case.scene, *case.options], case.ranks,
+                        timeout=600)
     lines = proc.stdout.strip().splitlines()
     return json.loads(lines[-1])["faces_per_rank"] if proc.returncode == 0 and lines else None
 
 
 def _faces_per_rank_main(argv):
-    """``mpirun -n N python -m pfault.study.hard_cases --faces-per-rank SCENE [options]``: prints
+    """``mpirun -n N python -m studies.hard_cases --faces-per-rank SCENE [options]``: prints
     {"faces_per_rank": [...]} (a face belongs to the rank owning its minus cell)."""
     scene, rest = argv[0], list(argv[1:])
     import petsc4py
     petsc4py.init([sys.argv[0], "-options_file", scene] + rest)
     from petsc4py import PETSc
-    from ..simulation import Simulation
+    from pfault.simulation import Simulation
     sim = Simulation(scene, [scene] + rest)
     try:
         sim.setup()
@@ -526,11 +509,7 @@ def load(case, runs_dir):
         return None
     with open(path) as fh:
         rec = json.load(fh)
-    summary = None
-    if os.path.exists(os.path.join(out, "summary.json")):
-        with open(os.path.join(out, "summary.json")) as fh:
-            summary = json.load(fh)
-    return RunResult(case, out, rec, summary)
+    return RunResult(case, out, rec, read_summary(out))
 
 
 def evaluate(results):
@@ -658,13 +637,7 @@ def newton_figure(results, path):
 
 
 def _machine():
-    model = "?"
-    try:
-        with open("/proc/cpuinfo") as fh:
-            model = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), "?")
-    except OSError:
-        pass
-    return f"{os.cpu_count()} cores ({model})"
+    return f"{os.cpu_count()} cores ({cpu_model()})"
 
 
 def _versions(results):
@@ -692,7 +665,7 @@ given."""
 
 def write_report(results, selected, meta, path):
     lines = ["# Hard cases for the contact solver", "",
-             f"Written by `pfault/study/hard_cases.py`: `{meta['command']}` ({meta['date']}, "
+             f"Written by `studies/hard_cases.py`: `{meta['command']}` ({meta['date']}, "
              f"{meta['wall_s']:.0f} s in all).", "",
              f"Machine: {_machine()}, shared; 1-minute load average {meta['load_before']:.2f} before the study, "
              f"{meta['load_mean']:.2f} on average after each run (2 ranks alone on 2 cores: about 2). "

@@ -1,0 +1,7 @@
+"""Studies built on pfault runs, kept beside the package (they read the repository's config/ and tests/scripts/
+and write reports under runs/): the two case studies of Franceschini et al. (Proc. IAHS 372, 2015) against the
+paper (``casestudies``), the contact solver's hard cases (``hard_cases``) and accuracy against cost on problems
+with a known answer (``accuracy``). ``run`` starts the runs (mpirun, environment, logs, timeouts) for them, the
+benchmarks and the tests.
+
+Run them from the repository root: ``python -m studies.casestudies``, or through benchmarks/*.py."""
