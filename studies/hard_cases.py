@@ -492,8 +492,8 @@ def _faces_per_rank_main(argv):
     sim = Simulation(scene, [scene] + rest)
     try:
         sim.setup()
-        faults = sim.problem.faults
-        counts = [int(c) for c in faults.mpi.allgather(faults.nf)]
+        faces = sim.model.faults.faces
+        counts = [int(c) for c in faces.mpi.allgather(faces.nf)]
     finally:
         sim.destroy()
     if PETSc.COMM_WORLD.rank == 0:

@@ -23,7 +23,7 @@ class FieldSplit:
     the face's traction-jump stabilisation, 1 % of the local compliance estimate, so about 100 times the local
     stiffness): an augmented Lagrangian whose coefficient comes from the discretisation. It keeps the
     displacement block nonsingular where a fault holds a body, and the outer iterations independent of the
-    mesh size (config/solver/iterative.opts). A stuck face without stabilisation has D = 0, which is why
+    mesh size (pfault/solver/options/iterative.opts). A stuck face without stabilisation has D = 0, which is why
     pfault.model rejects that combination.
 
     A scene without faults, or whose faults are all penalty faults, has no multiplier field: the whole unknown
