@@ -6,7 +6,7 @@
 Runs the scene (default: calibrated Queretaro at size factor 2, one step of a year), then writes the checkpoint
 of its last step ``-repeat`` times (default 20) each way, alternating, into runs/bench_checkpoint/; every write
 is timed between two barriers. Prints the median and the fastest write of each way, the file's size and a JSON
-line with the figures. Both ways write the same file (tests/test_parallel_output.py).
+line with the figures. Both ways write the same file (tests/parallel/test_parallel_output.py).
 """
 import json
 import os

@@ -7,6 +7,7 @@ import json
 import os
 import sys
 
+import numpy as np
 import pytest
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -16,6 +17,13 @@ from studies.run import command, read_summary, run_captured  # noqa: E402,F401  
 from studies.run import mpi_env as study_mpi_env  # noqa: E402
 
 PY = sys.executable
+
+# the scenes the tests run most (paths relative to the repository, where the tests run)
+OEDOMETER = "config/oedometer.opts"
+TWO_BLOCKS = "config/two_blocks.opts"
+FISSURE_BOX = "config/hard/fissure_box.opts"
+QUERETARO = "config/queretaro.opts"
+WUXI = "config/wuxi.opts"
 TIMEOUT = 600
 
 
@@ -57,3 +65,41 @@ def read_last_step(outdir):
 @pytest.fixture
 def repo():
     return REPO
+
+
+# the maxima of summary.json that two runs of the same scene must share
+MAXIMA = ("max_subsidence_m", "max_horizontal_displacement_m", "max_fault_opening_m", "max_fault_slip_m",
+          "max_horizontal_strain", "max_angular_distortion")
+
+
+def compare_runs(ref_dir, other_dir, rtol):
+    """Largest relative difference over every output dataset of the two runs (same steps asserted) and over
+    the summary maxima; asserts each is within rtol."""
+    import h5py
+    worst = 0.0
+    for name in ("fields", "fault", "surface"):
+        path = os.path.join(ref_dir, name + ".h5")
+        if not os.path.exists(path):
+            assert not os.path.exists(os.path.join(other_dir, name + ".h5"))
+            continue
+        with h5py.File(path, "r") as a, h5py.File(os.path.join(other_dir, name + ".h5"), "r") as b:
+            assert sorted(a["steps"]) == sorted(b["steps"]), name
+            for step in a["steps"]:
+                ga, gb = a["steps"][step], b["steps"][step]
+                assert ga.attrs["time"] == pytest.approx(gb.attrs["time"], rel=1e-14)
+                assert sorted(ga) == sorted(gb)
+                for key in ga:
+                    x, y = ga[key][()], gb[key][()]
+                    scale = max(float(np.max(np.abs(x), initial=0.0)), 1e-300)
+                    diff = float(np.max(np.abs(x - y), initial=0.0)) / scale
+                    assert diff <= rtol, f"{name}.h5 step {step} {key}: relative difference {diff:.3g}"
+                    worst = max(worst, diff)
+    with open(os.path.join(ref_dir, "summary.json")) as fh:
+        sa = json.load(fh)
+    with open(os.path.join(other_dir, "summary.json")) as fh:
+        sb = json.load(fh)
+    for key in MAXIMA:
+        assert sb[key] == pytest.approx(sa[key], rel=rtol, abs=1e-300), key
+    assert [r["step"] for r in sb["steps"]] == [r["step"] for r in sa["steps"]]
+    assert sb["completed_steps"] == sa["completed_steps"]
+    return worst

@@ -13,7 +13,7 @@ Element sizes, all proportional to 1/n up to the far-field cap: h_c = a/n within
 h_c/3 at the crack tip (within 0.05 a of the curved edge), growing with the distance d beyond those
 zones as h_c * 1.2 d/a, capped at L/4.
 
-Used by tests/test_crack.py and benchmarks/penny_crack.py (``make_penny_mesh``, ``crack_errors``), and
+Used by tests/verification/test_crack.py and benchmarks/penny_crack.py (``make_penny_mesh``, ``crack_errors``), and
 from the command line:
 
     .venv/bin/python tests/scripts/penny_mesh.py OUT.msh [--a 1] [--L 8] [--n 8]

@@ -16,7 +16,7 @@ Mode ``interface``: wells placed on the partition interface (on a vertical mesh 
 and inside a shared vertical face), settings read from -pfault_ options with read_flow_settings. Checks
 that every well load sums to 1 and equals the serial NumPy load; runs two mechanical steps through
 ``advance_to`` and ``cell_dp``.
-    theis.py interface -pfault_... (see tests/test_flow.py)
+    theis.py interface -pfault_... (see tests/verification/test_flow.py)
     prints {"load_sum", "load_diff_vs_serial", "wells", "dp_min", "dp_mean_check", "history", "went_back"}
 
 Options (after the words) go to PETSc (e.g. -flow_ksp_rtol 1e-12).

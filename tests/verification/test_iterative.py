@@ -7,13 +7,13 @@ their size, in a bounded number of Krylov iterations per Newton iteration."""
 import numpy as np
 import pytest
 
-from conftest import read_last_step, run_scene
+from conftest import FISSURE_BOX, read_last_step, run_scene
 from test_faults import read_fault
 
 pytestmark = pytest.mark.mpi
 
 SCENES = {
-    "fissure_box": ("config/hard/fissure_box.opts", ()),
+    "fissure_box": (FISSURE_BOX, ()),
     "queretaro_flow": ("config/queretaro_calibrated.opts",
                        ("-pfault_mesh_size_factor", "6", "-pfault_time_end", "6*year", "-pfault_time_steps", "3")),
 }

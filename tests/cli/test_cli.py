@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from conftest import run, run_scene
+from conftest import OEDOMETER, run, run_scene
 
 
 def test_help_lists_every_option():
@@ -53,7 +53,7 @@ BAD = [
 @pytest.mark.parametrize("extra,message", BAD)
 def test_bad_input(tmp_path, ranks, extra, message):
     out = tmp_path / "out"
-    proc, summary = run_scene("config/oedometer.opts", out, ranks=ranks, extra=extra, check=False)
+    proc, summary = run_scene(OEDOMETER, out, ranks=ranks, extra=extra, check=False)
     assert proc.returncode == 1, proc.stdout + proc.stderr
     lines = [line for line in proc.stderr.splitlines() if line.startswith("pfault: error:")]
     assert len(lines) == 1, proc.stderr       # printed once, not once per rank
@@ -71,7 +71,7 @@ def test_missing_material_property(tmp_path):
 
 
 def test_command_line_overrides_scene_file(tmp_path):
-    _, summary = run_scene("config/oedometer.opts", tmp_path, extra=["-pfault_time_steps", "2",
+    _, summary = run_scene(OEDOMETER, tmp_path, extra=["-pfault_time_steps", "2",
                                                                      "-pfault_box_cells", "1,1,4"])
     assert len(summary["steps"]) == 2
     assert summary["mesh"]["cells"] == 6 * 4
@@ -83,7 +83,7 @@ def test_command_line_overrides_scene_file(tmp_path):
 def test_krylov_method_chosen_over_a_solver_file(tmp_path):
     """-ksp_type on the command line replaces the solver file's Krylov method, and the file's options of that
     method (iterative.opts: -ksp_gmres_restart) do not make the run fail as unused options."""
-    _, summary = run_scene("config/oedometer.opts", tmp_path, extra=["-pfault_solver", "iterative",
+    _, summary = run_scene(OEDOMETER, tmp_path, extra=["-pfault_solver", "iterative",
                                                                      "-ksp_type", "cg"])
     assert summary["converged"]
     assert summary["solver"]["ksp_type"] == "cg"

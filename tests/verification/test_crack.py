@@ -23,7 +23,7 @@ import pytest
 
 from conftest import run_scene
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "scripts"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts"))
 from penny_mesh import crack_errors, make_penny_mesh, read_fault_step  # noqa: E402
 
 SCENE = "config/penny_crack.opts"

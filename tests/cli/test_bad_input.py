@@ -17,9 +17,9 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from conftest import PY, REPO, mpi_env
+from conftest import OEDOMETER, PY, REPO, TWO_BLOCKS, mpi_env
 
-OED = "config/oedometer.opts"
+OED = OEDOMETER
 TIMEOUT = 60
 FREE_SIDES = ["-pfault_bc_xmin_type", "free", "-pfault_bc_xmax_type", "free", "-pfault_bc_ymin_type", "free",
               "-pfault_bc_ymax_type", "free"]
@@ -138,7 +138,7 @@ CASES = [
                                                                                     "-ksp_type cg -pc_type gamg\n")],
          1, "solver.opts line 1: two options on one line (-ksp_type ... -pc_type)"),
     Case("iterative_solver_without_stabilisation",
-         lambda tmp, out, ranks: ["-m", "pfault", "config/two_blocks.opts", "-pfault_output_dir", str(out),
+         lambda tmp, out, ranks: ["-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out),
                                   "-pfault_solver", "iterative", "-pfault_fault_fault_stabilization", "false"], 1,
          "-pfault_fault_fault_stabilization false: the fieldsplit solver eliminates the multipliers through the "
          "stabilisation's face blocks; keep the stabilisation or use -pfault_solver mumps"),
@@ -189,7 +189,7 @@ CASES = [
          "free to translate along x and y and to rotate about z"),
     Case("no_vertical_support", scene("-pfault_bc_bottom_type", "free"), 1, "free to translate along z (nothing"),
     Case("fault_scene_pulled_loose", lambda tmp, out, ranks: [
-        "-m", "pfault", "config/two_blocks.opts", "-pfault_output_dir", str(out), "-pfault_bc_xmin_type",
+        "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_bc_xmin_type",
         "traction"], 1, "free to translate along x and to rotate about y"),
     # output: exit 4 (1 for an empty name), found before the first solve
     Case("output_in_proc", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", "/proc/pfault_out"], 4,
@@ -209,7 +209,7 @@ CASES = [
     Case("gravity_solve_not_converged", scene("-pfault_geostatic", "true", "-pc_type", "jacobi", "-ksp_max_it", "1"),
          3, "-pfault_geostatic: the elastic gravity solve of the initial stress failed (KSP reason -3)", "kept"),
     Case("gravity_solve_not_converged_with_faults", lambda tmp, out, ranks: [
-        "-m", "pfault", "config/two_blocks.opts", "-pfault_output_dir", str(out), "-pfault_geostatic", "true",
+        "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_geostatic", "true",
         "-pc_type", "jacobi", "-ksp_max_it", "1"], 3,
         "-pfault_geostatic: the elastic gravity solve of the initial stress failed (KSP reason -3)", "kept"),
     # faults on one rank only (rank 1 of 2): the job ends with the line and the code

@@ -5,7 +5,7 @@ import re
 
 import pytest
 
-from conftest import run_scene
+from conftest import OEDOMETER, TWO_BLOCKS, run_scene
 
 EFFECTS = ("faults", "flow", "pressure_tables", "geostatic", "tractions", "displacements")
 
@@ -48,7 +48,7 @@ def on(summary):
 
 
 def test_scene_without_faults_or_flow_builds_neither(tmp_path):
-    s, objects, events, line = run(tmp_path, "oed", "config/oedometer.opts")
+    s, objects, events, line = run(tmp_path, "oed", OEDOMETER)
     assert on(s) == {"pressure_tables"}
     assert s["fields"] == ["displacement"]                      # no lagrange_multiplier_fault field
     assert objects["Krylov Solver"] == 1                        # the skeleton's only: no flow KSP
@@ -61,7 +61,7 @@ def test_scene_without_faults_or_flow_builds_neither(tmp_path):
 
 def test_faults_add_exactly_the_multiplier_field_and_the_contact_work(tmp_path):
     with_f, o1, e1, _ = run(tmp_path, "f", "config/two_blocks.opts")
-    glued = scene_file(tmp_path, "glued", "config/two_blocks.opts", drop=("-pfault_faults", "-pfault_fault_"))
+    glued = scene_file(tmp_path, "glued", TWO_BLOCKS, drop=("-pfault_faults", "-pfault_fault_"))
     without, o0, e0, _ = run(tmp_path, "nof", glued)
     assert on(with_f) - on(without) == {"faults"} and on(without) <= on(with_f)
     assert with_f["fields"] == ["displacement", "lagrange_multiplier_fault"]
@@ -74,12 +74,12 @@ def test_faults_add_exactly_the_multiplier_field_and_the_contact_work(tmp_path):
 
 def test_flow_adds_its_ksp_and_nothing_else(tmp_path):
     """The oedometer column loaded by a well (flow model) against the same column loaded by a pressure table."""
-    flow_scene = scene_file(tmp_path, "flow", "config/oedometer.opts", drop=("-pfault_material_soil_pressure_change",),
+    flow_scene = scene_file(tmp_path, "flow", OEDOMETER, drop=("-pfault_material_soil_pressure_change",),
                             add=["-pfault_flow true", "-pfault_material_soil_hydraulic_conductivity 1e-5",
                                  "-pfault_flow_fixed_head_surfaces top", "-pfault_flow_wells 5,5",
                                  "-pfault_flow_well_screen -20,-80", "-pfault_flow_well_rate 0:0,10:1e-3"])
     flow, o1, e1, _ = run(tmp_path, "flow", flow_scene)
-    tables, o0, e0, _ = run(tmp_path, "tables", "config/oedometer.opts")
+    tables, o0, e0, _ = run(tmp_path, "tables", OEDOMETER)
     assert on(flow) ^ on(tables) == {"flow", "pressure_tables"}
     assert o1["Krylov Solver"] == o0["Krylov Solver"] + 1          # the flow_ KSP
     assert e1["pfaultFlowSolve"] > 0 and "pfaultFlowSolve" not in e0
@@ -88,8 +88,8 @@ def test_flow_adds_its_ksp_and_nothing_else(tmp_path):
 
 
 def test_geostatic_start_is_the_only_change(tmp_path):
-    plain, _, e0, _ = run(tmp_path, "plain", "config/oedometer.opts")
-    geo, _, e1, _ = run(tmp_path, "geo", "config/oedometer.opts", ["-pfault_geostatic", "true"])
+    plain, _, e0, _ = run(tmp_path, "plain", OEDOMETER)
+    geo, _, e1, _ = run(tmp_path, "geo", OEDOMETER, ["-pfault_geostatic", "true"])
     assert on(geo) - on(plain) == {"geostatic"}
     assert e1["pfaultGeostatic"] == 1 and "pfaultGeostatic" not in e0
     assert geo["effects"]["geostatic"]["setup_s"] > 0 and geo["effects"]["geostatic"]["per_step_s"] == 0.0
@@ -97,7 +97,7 @@ def test_geostatic_start_is_the_only_change(tmp_path):
 
 @pytest.mark.parametrize("ranks", [2])
 def test_effects_record_is_the_same_on_two_ranks(tmp_path, ranks):
-    one, _, _, _ = run(tmp_path, "r1", "config/two_blocks.opts")
-    two, _, _, _ = run(tmp_path, "r2", "config/two_blocks.opts", ranks=ranks)
+    one, _, _, _ = run(tmp_path, "r1", TWO_BLOCKS)
+    two, _, _, _ = run(tmp_path, "r2", TWO_BLOCKS, ranks=ranks)
     assert {k: (v["on"], v["detail"]) for k, v in one["effects"].items()} == \
         {k: (v["on"], v["detail"]) for k, v in two["effects"].items()}

@@ -17,9 +17,9 @@ import os
 import numpy as np
 import pytest
 
-from conftest import read_last_step, run_scene, run_script
+from conftest import FISSURE_BOX, TWO_BLOCKS, read_last_step, run_scene, run_script
 
-SCENE = "config/two_blocks.opts"
+SCENE = TWO_BLOCKS
 P = 1.0e6                                   # normal pressure on the fault (Pa)
 TAN_PHI = math.tan(math.radians(30.0))
 E, NU = 10.0e6, 0.25
@@ -426,7 +426,7 @@ def test_tractions_oscillate_without_stabilisation(tmp_path):
     results = {}
     for stab in ("true", "false"):
         out = tmp_path / stab
-        proc, s = run_scene("config/two_blocks.opts", out, extra=extra + ["-pfault_fault_fault_stabilization", stab],
+        proc, s = run_scene(TWO_BLOCKS, out, extra=extra + ["-pfault_fault_fault_stabilization", stab],
                             check=False)
         assert proc.returncode in (0, 3) and "Traceback" not in proc.stderr
         f = read_fault(out)
@@ -446,7 +446,7 @@ def test_singular_jacobian_fails_fast_and_says_so(tmp_path, ranks=2):
     and the step's line names the cause. (On one rank MUMPS's factorisation flags no null pivot here, INFOG(28) =
     0, and FGMRES stops on its divergence test, about 285 iterations per attempt.)"""
     from pfault.solver.policy import SINGULAR_MAX_IT
-    proc, s = run_scene("config/two_blocks.opts", tmp_path / "out", ranks=ranks,
+    proc, s = run_scene(TWO_BLOCKS, tmp_path / "out", ranks=ranks,
                         extra=["-pfault_geostatic", "true"], check=False)
     assert proc.returncode == 3 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     step = s["steps"][-1]
@@ -546,7 +546,7 @@ def test_a_step_at_zero_load_after_a_recovery_converges(tmp_path, method):
     and the gravity load, not with the zero load: one Newton iteration. Scaled by the load alone it ran to
     -snes_max_it (51 iterations, not converged)."""
     out = tmp_path / method
-    _, s = run_scene("config/hard/fissure_box.opts", out, ranks=2,
+    _, s = run_scene(FISSURE_BOX, out, ranks=2,
                      extra=["-pfault_geostatic", "true", "-pfault_fault_fissure_method", method,
                             "-pfault_material_sand_head_drawdown", "0:0,1*year:20,2*year:0,3*year:0",
                             "-pfault_time_steps", "3", "-pfault_time_end", "3*year", "-pfault_time_max_cuts", "0"])

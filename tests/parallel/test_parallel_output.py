@@ -13,9 +13,9 @@ import os
 import numpy as np
 import pytest
 
-from conftest import run_script
+from conftest import QUERETARO, run_script
 
-QRO = ["config/queretaro.opts", "-pfault_mesh_size_factor", "6", "-pfault_time_steps", "2", "-pfault_time_end",
+QRO = [QUERETARO, "-pfault_mesh_size_factor", "6", "-pfault_time_steps", "2", "-pfault_time_end",
        "2*year", "-pfault_figures", "false"]
 
 

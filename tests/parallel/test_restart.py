@@ -27,14 +27,14 @@ import os
 import numpy as np
 import pytest
 
-from conftest import run_scene
+from conftest import FISSURE_BOX, OEDOMETER, QUERETARO, WUXI, compare_runs, run_scene
 
 RTOL = 1e-10
 SCENES = {
-    "oedometer": ("config/oedometer.opts", (), "10", "5"),
-    "queretaro": ("config/queretaro.opts", ("-pfault_mesh_size_factor", "6", "-flow_ksp_rtol", "1e-13", "-ksp_atol",
+    "oedometer": (OEDOMETER, (), "10", "5"),
+    "queretaro": (QUERETARO, ("-pfault_mesh_size_factor", "6", "-flow_ksp_rtol", "1e-13", "-ksp_atol",
                                             "0"), "10*year", "5*year"),
-    "wuxi": ("config/wuxi.opts", ("-pfault_mesh_size_factor", "4", "-ksp_atol", "0"), "2*year",
+    "wuxi": (WUXI, ("-pfault_mesh_size_factor", "4", "-ksp_atol", "0"), "2*year",
              "1*year"),   # slip and open faces
     "flow": ("flow_box.opts", (), "2*day", "1*day"),
 }
@@ -66,45 +66,8 @@ def scene_file(tmp_path, name):
         path.write_text(FLOW_BOX)
         return str(path)
     return opts
-MAXIMA = ("max_subsidence_m", "max_horizontal_displacement_m", "max_fault_opening_m", "max_fault_slip_m",
-          "max_horizontal_strain", "max_angular_distortion")
-
-
 def _steps(extra, n, end):
     return [*extra, "-pfault_time_steps", str(n), "-pfault_time_end", end]
-
-
-def compare_runs(ref_dir, other_dir, rtol):
-    """Largest relative difference over every output dataset of the two runs (same steps asserted) and over
-    the summary maxima; asserts each is within rtol."""
-    import h5py
-    worst = 0.0
-    for name in ("fields", "fault", "surface"):
-        path = os.path.join(ref_dir, name + ".h5")
-        if not os.path.exists(path):
-            assert not os.path.exists(os.path.join(other_dir, name + ".h5"))
-            continue
-        with h5py.File(path, "r") as a, h5py.File(os.path.join(other_dir, name + ".h5"), "r") as b:
-            assert sorted(a["steps"]) == sorted(b["steps"]), name
-            for step in a["steps"]:
-                ga, gb = a["steps"][step], b["steps"][step]
-                assert ga.attrs["time"] == pytest.approx(gb.attrs["time"], rel=1e-14)
-                assert sorted(ga) == sorted(gb)
-                for key in ga:
-                    x, y = ga[key][()], gb[key][()]
-                    scale = max(float(np.max(np.abs(x), initial=0.0)), 1e-300)
-                    diff = float(np.max(np.abs(x - y), initial=0.0)) / scale
-                    assert diff <= rtol, f"{name}.h5 step {step} {key}: relative difference {diff:.3g}"
-                    worst = max(worst, diff)
-    with open(os.path.join(ref_dir, "summary.json")) as fh:
-        sa = json.load(fh)
-    with open(os.path.join(other_dir, "summary.json")) as fh:
-        sb = json.load(fh)
-    for key in MAXIMA:
-        assert sb[key] == pytest.approx(sa[key], rel=rtol, abs=1e-300), key
-    assert [r["step"] for r in sb["steps"]] == [r["step"] for r in sa["steps"]]
-    assert sb["completed_steps"] == sa["completed_steps"]
-    return worst
 
 
 @pytest.mark.parametrize("ranks", [1, 2])
@@ -134,7 +97,7 @@ def test_restart_on_another_rank_count(tmp_path, written, continued):
     """A checkpoint does not depend on the partition: a run continued on another number of ranks (from a
     checkpoint gathered to rank 0 on 1 rank, or written by every rank on 2) agrees with the uninterrupted run
     to the agreement between rank counts of the flow's iterative solver (~1e-10, see
-    tests/test_case_studies.py), with the Krylov solves run to -ksp_rtol (SCENES; at the default, 2 ranks
+    tests/verification/test_case_studies.py), with the Krylov solves run to -ksp_rtol (SCENES; at the default, 2 ranks
     continued on 3 were 3e-8 of the displacement off)."""
     import h5py
     opts, extra, end, half = SCENES["queretaro"]
@@ -317,9 +280,9 @@ def test_restart_keeps_the_penalty_faces_history(tmp_path, ranks):
     extra = ["-pfault_fault_fissure_method", "penalty", "-pfault_material_sand_head_drawdown",
              "0:0,2*year:20,4*year:8", "-ksp_atol", "0"]      # Krylov to -ksp_rtol: see the module's docstring
     ref, part = tmp_path / "ref", tmp_path / "part"
-    _, s_ref = run_scene("config/hard/fissure_box.opts", ref, ranks=ranks, extra=_steps(extra, 4, "4*year"))
-    run_scene("config/hard/fissure_box.opts", part, ranks=ranks, extra=_steps(extra, 3, "3*year"))
-    _, s = run_scene("config/hard/fissure_box.opts", part, ranks=ranks,
+    _, s_ref = run_scene(FISSURE_BOX, ref, ranks=ranks, extra=_steps(extra, 4, "4*year"))
+    run_scene(FISSURE_BOX, part, ranks=ranks, extra=_steps(extra, 3, "3*year"))
+    _, s = run_scene(FISSURE_BOX, part, ranks=ranks,
                      extra=[*_steps(extra, 4, "4*year"), "-pfault_restart", str(part)])
     assert s["completed_steps"] == [1, 2, 3, 4]
     # slip faces in every step; the unloading steps change states (and the slip decreases)

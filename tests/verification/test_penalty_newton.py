@@ -11,11 +11,11 @@ import re
 
 import pytest
 
-from conftest import run_scene
+from conftest import FISSURE_BOX, run_scene
 
 pytestmark = pytest.mark.mpi
 
-SCENE = "config/hard/fissure_box.opts"
+SCENE = FISSURE_BOX
 K = 8.0e6 / (100.0 / 8 * 100.0 / 10 / 2) ** 0.5 * 100        # 100 E/h of the clay on 12.5 m x 10 m halves
 STEP = ["-pfault_box_cells", "32,8,10", "-pfault_fault_fissure_method", "penalty",
         "-pfault_fault_fissure_penalty_normal", f"{K!r}", "-pfault_fault_fissure_penalty_tangential", f"{K!r}",

@@ -17,7 +17,7 @@ import os
 import numpy as np
 import pytest
 
-from conftest import run_scene
+from conftest import QUERETARO, WUXI, run_scene
 from pfault.io import figures as fg
 
 SMALL = ("-pfault_mesh_size_factor", "4", "-pfault_time_steps", "3")
@@ -45,12 +45,12 @@ def _run(tmp_path_factory, scene, name):
 
 @pytest.fixture(scope="module")
 def wuxi(tmp_path_factory):
-    return _run(tmp_path_factory, "config/wuxi.opts", "wuxi")
+    return _run(tmp_path_factory, WUXI, "wuxi")
 
 
 @pytest.fixture(scope="module")
 def queretaro(tmp_path_factory):
-    return _run(tmp_path_factory, "config/queretaro.opts", "queretaro")
+    return _run(tmp_path_factory, QUERETARO, "queretaro")
 
 
 def _surface_subsidence(run_dir):

@@ -18,10 +18,9 @@ import time
 import numpy as np
 import pytest
 
-from conftest import REPO, command, mpi_env, run_scene
-from test_restart import compare_runs
+from conftest import OEDOMETER, QUERETARO, REPO, WUXI, command, compare_runs, mpi_env, run_scene
 
-QRO = "config/queretaro.opts"
+QRO = QUERETARO
 # -flow_ksp_rtol 1e-13: 2-rank flow solves are reproducible from run to run only to ~ksp_rtol; -ksp_atol 0: the
 # fault steps' Krylov solves run to -ksp_rtol, not to their default stop at a tenth of the step's tolerance,
 # where runs agree only to that tolerance (test_restart.py)
@@ -155,7 +154,7 @@ def test_stop_signal_before_the_time_loop_is_one_line(tmp_path, sig):
     its first step) stops it at once with exit code 7 and one line naming the signal, not a traceback or a
     death by signal; nothing is written."""
     run_dir = tmp_path / "run"
-    proc = subprocess.Popen(command(["-m", "pfault", "config/oedometer.opts", "-pfault_box_cells", "30,30,30",
+    proc = subprocess.Popen(command(["-m", "pfault", OEDOMETER, "-pfault_box_cells", "30,30,30",
                                      "-pfault_output_dir", str(run_dir)], 1),
                             cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(1.0)
@@ -298,17 +297,17 @@ def test_new_run_replaces_an_old_result_only_after_its_first_step(tmp_path):
     old = _snapshot(run_dir)
     assert "fault.xdmf" in old
     # a run that fails at its first solve (a misspelled solver option) leaves it as it was
-    proc, _ = run_scene("config/oedometer.opts", run_dir, extra=["-ksp_typo", "1"], check=False)
+    proc, _ = run_scene(OEDOMETER, run_dir, extra=["-ksp_typo", "1"], check=False)
     assert proc.returncode == 1 and "ksp_typo" in proc.stderr
     assert _snapshot(run_dir) == old
     # so does one killed before its first step
-    proc = subprocess.Popen(command(["-m", "pfault", "config/oedometer.opts", "-pfault_output_dir", str(run_dir)], 1),
+    proc = subprocess.Popen(command(["-m", "pfault", OEDOMETER, "-pfault_output_dir", str(run_dir)], 1),
                             cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     proc.send_signal(signal.SIGTERM)
     proc.communicate(timeout=TIMEOUT)
     assert proc.returncode != 0 and _snapshot(run_dir) == old
     # a run that completes a step replaces it: no file of the old run is left (no fault output now)
-    code, out, err = start_and_signal(["config/oedometer.opts", "-pfault_output_dir", str(run_dir),
+    code, out, err = start_and_signal([OEDOMETER, "-pfault_output_dir", str(run_dir),
                                        "-pfault_time_steps", "2000", "-pfault_output_every", "1000",
                                        "-pfault_figures", "false"], 1, _to_process(signal.SIGTERM))
     assert code == 7, err
@@ -384,7 +383,7 @@ def test_plain_run_writes_figures_and_the_fissure_hazard_map(tmp_path):
     tensile strain over the ridge crest, where the fissure opens (x = 1000 m): in a surface triangle that
     touches the fissure trace, two orders of magnitude above the strain 300 m away from it."""
     run_dir = tmp_path / "wuxi"
-    proc, s = run_scene("config/wuxi.opts", run_dir, ranks=2,
+    proc, s = run_scene(WUXI, run_dir, ranks=2,
                         extra=["-pfault_mesh_size_factor", "4", "-pfault_time_steps", "2", "-pfault_figures", "true"])
     for name in ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"):
         with open(run_dir / name, "rb") as fh:

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from conftest import read_last_step, run_scene
+from conftest import OEDOMETER, read_last_step, run_scene
 
 E, NU, ALPHA, DP, H = 10e6, 0.25, 1.0, 0.1e6, 100.0
 C_M = (1 + NU) * (1 - 2 * NU) / (E * (1 - NU))
@@ -16,7 +16,7 @@ def test_analytic_value():
 
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_oedometer_settlement(tmp_path, ranks):
-    _, summary = run_scene("config/oedometer.opts", tmp_path, ranks=ranks, extra=["-pfault_box_cells", "2,2,10"])
+    _, summary = run_scene(OEDOMETER, tmp_path, ranks=ranks, extra=["-pfault_box_cells", "2,2,10"])
     assert summary["converged"]
     assert summary["ranks"] == ranks
     assert abs(summary["max_subsidence_m"] - EXACT) / EXACT < 1e-8
@@ -39,7 +39,7 @@ def test_oedometer_settlement(tmp_path, ranks):
 
 def test_oedometer_iterative_solver(tmp_path):
     """CG + GAMG with the rigid-body near-null space reaches the same settlement."""
-    _, summary = run_scene("config/oedometer.opts", tmp_path, ranks=2,
+    _, summary = run_scene(OEDOMETER, tmp_path, ranks=2,
                            extra=["-pfault_box_cells", "3,3,30", "-pfault_solver", "gamg"])
     assert abs(summary["max_subsidence_m"] - EXACT) / EXACT < 1e-8
     assert all(s["ksp_its"] > 1 for s in summary["steps"])
