@@ -72,11 +72,13 @@ class RunOutput:
         self.model, self.state, self.argv = model, state, list(argv)
         self.comm = model.comm
         self.restart_dir, self.restart_step = restart_dir, restart_step
-        self.writer = None                  # rank 0, once open
-        self.staging = self.run_path = None     # where the output goes (every rank, once it is opened)
+        self.writer: Any = None             # rank 0, once open (a RunWriter)
+        self.staging: str | None = None     # where the output goes (every rank, once it is opened)
+        self.run_path: str | None = None
         self.committed = False              # the run's directory is in place
-        self.fields = self.checkpoint = None
-        self.surface = None
+        self.fields: Any = None             # StepOutput, once open
+        self.checkpoint: Any = None         # checkpoint.Writer, once open
+        self.surface: Any = None            # the land surface (rank 0), once the writer is made
 
     @property
     def is_open(self) -> bool:
@@ -141,7 +143,7 @@ class RunOutput:
                                                                                self.surface.triangles))
             writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
             if self.restart_dir:
-                writer.continue_from(self.restart_dir, self.restart_step)
+                writer.continue_from(self.restart_dir, int(self.restart_step or 0))
         except ValueError as exc:       # the series of the run it continues are of another mesh
             raise InputError(f"-pfault_restart {self.restart_dir}: {exc}") from None
         except OSError as exc:

@@ -65,8 +65,8 @@ class Equations:
             self.J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
             self.J.setNearNullSpace(self.nullspace)
         self.n_jacobians = 0            # interface Jacobians assembled (a configuration seen before is kept)
-        self._jacobian_key = None       # faces' states of the assembled J while it depends on nothing else
-        self._states = None             # faces' states imposed on residual and Jacobian (fixed_states)
+        self._jacobian_key: np.ndarray | None = None    # faces' states of J while it depends on nothing else
+        self._states: np.ndarray | None = None  # faces' states imposed on residual and Jacobian (fixed_states)
 
     def _build_operator(self) -> Any:
         # Filled as BAIJ (every point carries 3k dofs, so the DM's local-to-global map has block size 3): a cell
