@@ -36,7 +36,7 @@ class Mirror(Observer):
         if not result.output:
             return
         out = self.output
-        if self.writer is None:
+        if self.fields is None:         # (the writer is rank 0's: None on the other ranks)
             self.writer = run_on_root(out.comm, out.create_writer, gathered_dir)
             self.fields = out.step_output(self.writer, parallel=False)
             self.write(0, 0.0, np.zeros(len(result.u_rel)), initial=True)
