@@ -23,6 +23,7 @@ from .effects import decide as decide_effects
 from .errors import InputError, run_on_root
 from .mesh import distributed
 from .solver.equations import Equations, constrained_local
+from .solver.choice import AUTO, ITERATIVE_FROM_DOFS, solver_file_name
 from .sources import FlowSource, TableSource
 
 
@@ -32,7 +33,7 @@ class Scene:
     settings: Any
     restart_dir: str | None
     figures: bool
-    solver_file: str | None
+    solver_name: str                # -pfault_solver: auto, a name or a path
     material_names: list
     surface_names: list
     materials: list
@@ -48,7 +49,8 @@ class Scene:
 class Model:
     """A run's model. ``serial`` and ``split`` (the serial mesh and its fault split) are held by rank 0 only;
     ``faults`` is the fault interface (None without faults), ``fault_id`` the fault of every fault face (serial
-    order; None without faults), ``source`` the pore-pressure source, ``equations`` the discrete problem."""
+    order; None without faults), ``source`` the pore-pressure source, ``equations`` the discrete problem,
+    ``solver_file`` the solver options file applied (None: none)."""
     comm: Any
     scene: Scene
     serial: Any
@@ -60,6 +62,7 @@ class Model:
     faults: Any
     source: Any
     equations: Any
+    solver_file: str | None
     wall: dict
 
     @property
@@ -105,8 +108,10 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
             # a restarted run continues in the directory of the run it continues
             s = dataclasses.replace(s, output_dir=restart_dir)
     run_on_root(comm, checks.probe_output_dir, s.output_dir)
-    from .solver.setup import apply_solver_file
-    solver_file = apply_solver_file(reader.get("pfault_solver"), options_file)
+    solver_name = reader.get("pfault_solver")
+    if solver_name and solver_name != AUTO:
+        from .solver.setup import find_solver_file
+        find_solver_file(solver_name, options_file)         # a file that is not there: an error before meshing
     build_serial = scn.generator_options(reader, s, index_bytes=np.dtype(PETSc.IntType).itemsize)
     serial = run_on_root(comm, build_serial)
     names = comm.tompi4py().bcast((serial.material_names, sorted(serial.surfaces)) if comm.rank == 0 else None)
@@ -128,7 +133,7 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     contact = scn.read_contact_options(reader) if fault_names else None
     reader.check_pfault_options()
     effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries)
-    scene = Scene(s, restart_dir, figures, solver_file, material_names, surface_names,
+    scene = Scene(s, restart_dir, figures, solver_name, material_names, surface_names,
                   materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects)
     return scene, serial
 
@@ -177,6 +182,21 @@ def _dofmap(scene: Scene, mesh: Any, fault_id: Any) -> Any:
     return fields.build(mesh, vert_sides=mesh.vert_sides, cell_side=mesh.cell_side, cell_multipliers=lm_faces)
 
 
+def _apply_solver(scene: Scene, mesh: Any, options_file: str) -> str | None:
+    """Apply the solver options file of -pfault_solver (pfault.solver.choice: ``auto`` takes the direct solver below
+    a size, the iterative one above) where the scene and the command line are silent; returns its path."""
+    from .solver.setup import apply_solver_file
+    v = mesh.dm.createGlobalVec()
+    n_dofs = v.getSize()
+    v.destroy()
+    name = solver_file_name(scene.solver_name or "", n_dofs, scene.fault_settings,
+                            pc_type_given=PETSc.Options().hasName("pc_type"))
+    if scene.solver_name == AUTO and name:
+        PETSc.Sys.Print(f"pfault: -pfault_solver auto: {name} ({n_dofs:,} unknowns; the iterative solver from "
+                        f"{ITERATIVE_FROM_DOFS:,})")
+    return apply_solver_file(name, options_file)
+
+
 def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     """The model of the scene in ``options_file`` (with the command line's options, through ``reader``)."""
     t0 = time.perf_counter()
@@ -198,6 +218,7 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     stage.push()
     fault_id = topology.fault_id if topology is not None else None
     dofmap = _dofmap(scene, mesh, fault_id)
+    solver_file = _apply_solver(scene, mesh, options_file)
     source = None
     try:
         assembler = ElasticAssembler(mesh, dofmap, scene.materials)
@@ -225,4 +246,5 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
         raise
     stage.pop()
     wall["setup"] = time.perf_counter() - t0
-    return Model(comm, scene, serial, split, mesh, dofmap, assembler, fault_id, faults, source, equations, wall)
+    return Model(comm, scene, serial, split, mesh, dofmap, assembler, fault_id, faults, source, equations, solver_file,
+                 wall)

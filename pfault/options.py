@@ -119,8 +119,9 @@ SPECS = [
     _s("pfault_contact_monitor", "bool", False, "", "print one line per Newton iteration of fault scenes: "
        "residual norm, stick/slip/open counts and how many faces changed state"),
     # solver
-    _s("pfault_solver", "string", "", "", "solver options file: a path, solver/NAME.opts beside the scene, or "
-       "one of pfault's (mumps, gamg, iterative); its options apply where not set by the scene or the command line"),
+    _s("pfault_solver", "string", "auto", "", "solver options file: auto (mumps below 50,000 unknowns or where "
+       "faults need it, iterative above), a path, solver/NAME.opts beside the scene, or one of pfault's (mumps, gamg, "
+       "iterative); its options apply where not set by the scene or the command line"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
     _s("pfault_geostatic_k0", "quantity", None, "", "ratio K0 >= 0 of horizontal to vertical effective stress "

@@ -153,7 +153,7 @@ class Simulation:
         ksp_type, pc_type = self.solver.ksp_types()
         newton = sum(r.get("newton_its", 0) for r in steps)
         krylov = sum(r.get("ksp_its", 0) for r in steps)
-        return {"file": self.model.scene.solver_file, "ksp_type": ksp_type, "pc_type": pc_type,
+        return {"file": self.model.solver_file, "ksp_type": ksp_type, "pc_type": pc_type,
                 "newton_its": int(newton), "ksp_its": int(krylov),
                 "ksp_per_newton": krylov / newton if newton else 0.0,
                 "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
