@@ -17,9 +17,9 @@ from petsc4py import PETSc
 
 from .serial import TET_FACES, face_keys
 
-# DMLabels on the mesh, named for what they hold. The mesh is not interpolated (cells and vertices only): a face is
-# local face k of a cell (opposite its local vertex k, serial.TET_FACES), and a label on faces lives on the cells
-# with the value 4 * index + k (a cell with several such faces has several values).
+# DMLabels on the mesh, named for what they hold; a scene has those that hold points. The mesh is not interpolated
+# (cells and vertices only): a face is local face k of a cell (opposite its local vertex k, serial.TET_FACES), and a
+# label on faces lives on the cells with the value 4 * index + k (a cell with several such faces has several values).
 MATERIAL = "material"                           # cells: material index
 BOUNDARY_FACE = "boundary_face"                 # cells: 4 * boundary + k, face k under the boundary's tractions
 FAULT_FACE = "fault_face"                       # cells: 4 * fault + k, face k on the fault, the cell on its minus side
@@ -148,14 +148,16 @@ def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=No
         nc = nv = 0
     dm = PETSc.DMPlex().createFromCellList(3, cells, coords, interpolate=False, comm=comm)
     dm.setName("mesh")
-    for name in LABELS:
-        dm.createLabel(name)
-    fault_keys = None
+    labels, fault_keys = {}, None
     if rank == 0:
-        _label_serial(dm, serial, cell_face_tag, vert_constraint, vert_ground, split)
+        labels = _serial_labels(serial, cell_face_tag, vert_constraint, vert_ground, split)
         if split is not None:
             fault_keys = 4 * split.minus_cell + split.minus_lface     # (cell, local face) of each fault face
-    nc, nv, fault_keys = comm.tompi4py().bcast((nc, nv, fault_keys) if rank == 0 else None, root=0)
+    nc, nv, names, fault_keys = comm.tompi4py().bcast((nc, nv, list(labels), fault_keys) if rank == 0 else None)
+    for name in names:      # the labels that hold points, on every rank in the same order
+        dm.createLabel(name)
+        if rank == 0:
+            _set_label(dm.getLabel(name), *labels[name])
     _set_partition(dm, serial.tets if rank == 0 else None, nv)
     migration = dm.distribute() if comm.size > 1 else None      # migrates the labels with their points
     return _localise(dm, migration, nc, nv, fault_keys)
@@ -198,39 +200,41 @@ def _localise(dm, migration, nc, nv, fault_keys):
                      v_start=v_start, migration=migration, n_global_cells=nc, n_global_vertices=nv)
 
 
-def _label_serial(dm, serial, cell_face_tag, vert_constraint, vert_ground, split):
-    """Label the serial mesh's points (rank 0): cells [0, nc), vertices [nc, nc + nv)."""
+def _serial_labels(serial, cell_face_tag, vert_constraint, vert_ground, split):
+    """{label: (points, values)} on the serial mesh's points (cells [0, nc), vertices [nc, nc + nv)), for the
+    labels that hold points."""
     nc, nv = len(serial.tets), len(serial.points)
-    _set_label(dm, MATERIAL, np.arange(nc), serial.cell_material)
+    out = {MATERIAL: (np.arange(nc), serial.cell_material)}
     if cell_face_tag is not None:
         cell, k = np.nonzero(np.asarray(cell_face_tag) >= 0)
-        _set_label(dm, BOUNDARY_FACE, cell, 4 * cell_face_tag[cell, k] + k)
+        out[BOUNDARY_FACE] = (cell, 4 * cell_face_tag[cell, k] + k)
+    if split is not None:
+        out[FAULT_FACE] = (split.minus_cell, 4 * split.fault_id + split.minus_lface)
+        plus = split.cell_side @ (1 << np.arange(4))
+        cell = np.flatnonzero(plus)
+        out[FAULT_SIDE] = (cell, plus[cell])
     if vert_constraint is not None:
         v = np.flatnonzero(vert_constraint)
-        _set_label(dm, BOUNDARY_CONSTRAINT, nc + v, vert_constraint[v])
+        out[BOUNDARY_CONSTRAINT] = (nc + v, vert_constraint[v])
     if vert_ground is not None:
         vg = np.asarray(vert_ground).reshape(nv, -1)
         v = np.flatnonzero(vg[:, 0])
-        _set_label(dm, GROUND_SURFACE, nc + v, vg[v, 0])
+        out[GROUND_SURFACE] = (nc + v, vg[v, 0])
         if vg.shape[1] > 1:
             v = np.flatnonzero(vg[:, 1] >= 0)
-            _set_label(dm, DISPLACEMENT_BOUNDARY, nc + v, vg[v, 1])
+            out[DISPLACEMENT_BOUNDARY] = (nc + v, vg[v, 1])
     if split is not None:
-        _set_label(dm, FAULT_FACE, split.minus_cell, 4 * split.fault_id + split.minus_lface)
-        plus = split.cell_side @ (1 << np.arange(4))
-        cell = np.flatnonzero(plus)
-        _set_label(dm, FAULT_SIDE, cell, plus[cell])
         v = np.flatnonzero(split.vert_sides > 1)
-        _set_label(dm, FAULT_SPLIT, nc + v, np.ones(len(v), np.int64))
+        out[FAULT_SPLIT] = (nc + v, np.ones(len(v), np.int64))
+    return {name: out[name] for name in LABELS if name in out and len(out[name][0])}
 
 
-def _set_label(dm, name, points, values):
-    """Give ``points`` their ``values`` in label ``name``: one index set per value (a point may have several)."""
-    label = dm.getLabel(name)
+def _set_label(label, points, values):
+    """Give ``points`` their ``values`` in ``label``: one index set per value (a point may have several)."""
     points, values = np.asarray(points, dtype=np.int64), np.asarray(values, dtype=np.int64)
     order = np.lexsort((points, values))
     points, values = points[order].astype(PETSc.IntType), values[order]
-    starts = np.flatnonzero(np.r_[True, values[1:] != values[:-1]]) if len(values) else np.zeros(0, np.int64)
+    starts = np.flatnonzero(np.r_[True, values[1:] != values[:-1]])
     for lo, hi in zip(starts, np.r_[starts[1:], len(values)]):
         stratum = PETSc.IS().createGeneral(points[lo:hi], comm=PETSc.COMM_SELF)
         label.setStratumIS(int(values[lo]), stratum)
