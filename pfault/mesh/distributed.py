@@ -1,8 +1,9 @@
 """DMPlex from a SerialMesh on rank 0, partitioned by a graph partitioner and distributed by DMPlexDistribute.
 
-Per-point data (cell connectivity in serial vertex ids, materials, boundary tags, constraints) travel
-to their new owners through the migration PetscSF returned by DMPlexDistribute; output fields come
-back to rank 0 in the serial numbering through the same SF.
+Point data (materials, boundary faces and constraints, the ground surface, the faults' faces and sides) are
+DMLabels on the serial DMPlex's cells and vertices (see the label names below); DMPlexDistribute migrates them
+with their points, and the local mesh reads them back as arrays. Output fields come back to rank 0 in the serial
+numbering through the migration PetscSF returned by DMPlexDistribute.
 """
 
 from __future__ import annotations
@@ -16,14 +17,36 @@ from petsc4py import PETSc
 
 from .serial import TET_FACES, face_keys
 
+# DMLabels on the mesh, named for what they hold; a scene has those that hold points. The mesh is not interpolated
+# (cells and vertices only): a face is local face k of a cell (opposite its local vertex k, serial.TET_FACES), and a
+# label on faces lives on the cells with the value 4 * index + k (a cell with several such faces has several values).
+MATERIAL = "material"                           # cells: material index
+BOUNDARY_FACE = "boundary_face"                 # cells: 4 * boundary + k, face k under the boundary's tractions
+FAULT_FACE = "fault_face"                       # cells: 4 * fault + k, face k on the fault, the cell on its minus side
+FAULT_SIDE = "fault_side"                       # cells: bit k set where the cell uses its vertex k's plus-side dofs
+BOUNDARY_CONSTRAINT = "boundary_constraint"     # vertices: constraint mask (bit i: displacement component i fixed;
+                                                # solver.flow.FIXED_HEAD_BIT: head fixed)
+DISPLACEMENT_BOUNDARY = "displacement_boundary"  # vertices: index of the prescribed-displacement boundary
+GROUND_SURFACE = "ground_surface"               # vertices: 1 on the ground surface
+FAULT_SPLIT = "fault_split"                     # vertices: 1 where a fault splits the vertex (plus-side dofs)
+LABELS = (MATERIAL, BOUNDARY_FACE, FAULT_FACE, FAULT_SIDE, BOUNDARY_CONSTRAINT, DISPLACEMENT_BOUNDARY,
+          GROUND_SURFACE, FAULT_SPLIT)
+
 
 @dataclass
 class LocalMesh:
-    dm: PETSc.DMPlex
+    dm: PETSc.DMPlex            # holds the labels above on its local points
     coords: np.ndarray          # (nv, 3) local vertices (owned and ghost)
     cells: np.ndarray           # (nc, 4) local vertex indices
-    cell_data: np.ndarray       # (nc, k) int payload columns (see CELL_COLUMNS)
-    vert_data: np.ndarray       # (nv, k) int payload columns (see VERT_COLUMNS)
+    cell_material: np.ndarray   # (nc,) material index
+    cell_face_tag: np.ndarray   # (nc, 4) boundary with tractions on local face k, -1: none
+    cell_side: np.ndarray       # (nc, 4) 1 where the cell uses the plus-side dofs of a split fault vertex
+    cell_fault_face: np.ndarray  # (nc, 4) serial id of the fault face on local face k when this cell is its minus
+                                 # cell, else -1
+    vert_constraint: np.ndarray  # (nv,) constraint mask (bit i: component i fixed)
+    vert_ground: np.ndarray     # (nv,) 1 on the ground surface, else 0
+    vert_sides: np.ndarray      # (nv,) 2 at split fault vertices, else 1
+    vert_displacement_bc: np.ndarray  # (nv,) index of the prescribed-displacement boundary, -1: none
     cell_serial: np.ndarray     # (nc,) serial cell id
     vert_serial: np.ndarray     # (nv,) serial vertex id
     vert_owned: np.ndarray      # (nv,) bool
@@ -33,46 +56,10 @@ class LocalMesh:
     n_global_cells: int
 
     @property
-    def cell_material(self):
-        return self.cell_data[:, 4]
-
-    @property
-    def cell_face_tag(self):
-        return self.cell_data[:, 5:9]
-
-    @property
-    def cell_side(self):
-        """(nc,4) 1 where the cell uses the plus-side dofs of a split fault vertex."""
-        return self.cell_data[:, 9:13]
-
-    @property
-    def cell_fault_face(self):
-        """(nc,4) serial id of the fault face on local face k when this cell is its minus cell, else -1."""
-        return self.cell_data[:, 13:17]
-
-    @property
-    def vert_sides(self):
-        return self.vert_data[:, 2]
-
-    @property
-    def vert_displacement_bc(self):
-        return self.vert_data[:, 3]
-
-
-# payload layout: every point row has the same number of int columns
-# cells: 4 serial vertex ids, material, 4 boundary face tags (-1: none), 4 fault sides, 4 minus fault faces
-CELL_COLUMNS = 17
-# vertices: constraint mask (bit i: component i fixed), ground-surface flag, displacement sides (1 or 2),
-# index of the prescribed-displacement boundary (-1: none)
-VERT_COLUMNS = 4
-PAYLOAD = max(CELL_COLUMNS, VERT_COLUMNS)
-
-
-def _int_type(width):
-    base = MPI.INT if PETSc.IntType().itemsize == 4 else MPI.INT64_T
-    t = base.Create_contiguous(width)
-    t.Commit()
-    return t
+    def vert_data(self):
+        """(nv, 4) per-vertex columns: constraint mask, ground-surface flag, displacement sides, displacement
+        boundary (the layout readers of ``vert_data[:, 0]`` and ``vert_data[:, 1]`` expect)."""
+        return np.column_stack([self.vert_constraint, self.vert_ground, self.vert_sides, self.vert_displacement_bc])
 
 
 def dual_graph(tets, nv):
@@ -145,7 +132,10 @@ def _set_partition(dm, tets, nv):
 
 
 def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=None, split=None):
-    """Create, distribute and localise the mesh. ``serial`` and the per-entity arrays live on rank 0."""
+    """Create, label, distribute and localise the mesh. ``serial`` and the per-entity arrays live on rank 0:
+    ``cell_face_tag`` (nc, 4) boundary with tractions on each local face (-1: none), ``vert_constraint`` (nv,)
+    constraint masks, ``vert_ground`` (nv,) ground-surface flags or (nv, 2) flags and prescribed-displacement
+    boundaries (-1: none), ``split`` the faults' FaultSplit."""
     rank = comm.rank
     itype = PETSc.IntType
     if rank == 0:
@@ -158,70 +148,149 @@ def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=No
         nc = nv = 0
     dm = PETSc.DMPlex().createFromCellList(3, cells, coords, interpolate=False, comm=comm)
     dm.setName("mesh")
-    n_global = comm.tompi4py().bcast((nc, nv) if rank == 0 else None, root=0)
-
-    # payload on the serial points: cells [0, nc), vertices [nc, nc + nv)
-    root = np.full((nc + nv, PAYLOAD), -1, dtype=itype)
+    labels, fault_keys = {}, None
     if rank == 0:
-        root[:nc, 0:4] = serial.tets
-        root[:nc, 4] = serial.cell_material
-        if cell_face_tag is not None:
-            root[:nc, 5:9] = cell_face_tag
-        root[nc:, 0] = 0 if vert_constraint is None else vert_constraint
-        if vert_ground is not None:
-            vg = np.asarray(vert_ground).reshape(nv, -1)
-            root[nc:, 1] = vg[:, 0]
-            root[nc:, 3] = vg[:, 1] if vg.shape[1] > 1 else -1
-        else:
-            root[nc:, 1] = 0
-            root[nc:, 3] = -1
-        root[nc:, 2] = 1
-        root[:nc, 9:13] = 0
+        labels = _serial_labels(serial, cell_face_tag, vert_constraint, vert_ground, split)
         if split is not None:
-            root[nc:, 2] = split.vert_sides
-            root[:nc, 9:13] = split.cell_side
-            root[split.minus_cell, 13 + split.minus_lface] = np.arange(len(split.minus_cell))
-    serial_id = np.concatenate([np.arange(nc), np.arange(nv)]).astype(itype)
-
+            fault_keys = 4 * split.minus_cell + split.minus_lface     # (cell, local face) of each fault face
+    nc, nv, names, fault_keys = comm.tompi4py().bcast((nc, nv, list(labels), fault_keys) if rank == 0 else None)
+    for name in names:      # the labels that hold points, on every rank in the same order
+        dm.createLabel(name)
+        if rank == 0:
+            _set_label(dm.getLabel(name), *labels[name])
     _set_partition(dm, serial.tets if rank == 0 else None, nv)
-    migration = dm.distribute() if comm.size > 1 else None
+    migration = dm.distribute() if comm.size > 1 else None      # migrates the labels with their points
+    return _localise(dm, migration, nc, nv, fault_keys)
+
+
+def _localise(dm, migration, nc, nv, fault_keys):
+    """The LocalMesh of a distributed DM: connectivity, ownership, serial ids and the labels as arrays.
+    ``fault_keys``: 4 * minus cell + local face of each fault face in serial order (None: no faults)."""
     p_start, p_end = dm.getChart()
-    if migration is not None:
-        leaf = np.full((p_end - p_start, PAYLOAD), -1, dtype=itype)
-        unit = _int_type(PAYLOAD)
-        migration.bcastBegin(unit, root, leaf, MPI.REPLACE)
-        migration.bcastEnd(unit, root, leaf, MPI.REPLACE)
-        unit.Free()
-        leaf_id = np.full(p_end - p_start, -1, dtype=itype)
-        migration.bcastBegin(MPI.INT if itype().itemsize == 4 else MPI.INT64_T, serial_id, leaf_id, MPI.REPLACE)
-        migration.bcastEnd(MPI.INT if itype().itemsize == 4 else MPI.INT64_T, serial_id, leaf_id, MPI.REPLACE)
-    else:
-        leaf, leaf_id = root, serial_id
     c_start, c_end = dm.getHeightStratum(0)
     v_start, v_end = dm.getDepthStratum(0)
     assert c_start == 0 and c_end == v_start, "expected cells before vertices in the chart"
-    cell_data = np.ascontiguousarray(leaf[c_start:c_end, :CELL_COLUMNS])
-    vert_data = np.ascontiguousarray(leaf[v_start:v_end, :VERT_COLUMNS])
-    cell_serial = leaf_id[c_start:c_end].astype(np.int64)
-    vert_serial = leaf_id[v_start:v_end].astype(np.int64)
-    # local connectivity from serial vertex ids
-    order = np.argsort(vert_serial)
-    pos = np.searchsorted(vert_serial[order], cell_data[:, 0:4])
-    local_cells = order[np.minimum(pos, len(order) - 1)] if len(order) else np.zeros((0, 4), np.int64)
-    if len(local_cells) and np.any(vert_serial[local_cells] != cell_data[:, 0:4]):
-        raise RuntimeError("a cell refers to a vertex that did not migrate with it")
-    coords = dm.getCoordinatesLocal().getArray().reshape(-1, 3).copy()
+    cells, verts = (dm, c_start, c_end), (dm, v_start, v_end)
+    serial_id = _serial_points(migration, p_end - p_start)
+    cell_serial = serial_id[c_start:c_end]
     # ownership from the point SF: leaves of the point SF are ghosts
     owned = np.ones(v_end - v_start, dtype=bool)
-    ilocal = dm.getPointSF().getGraph()[1] if comm.size > 1 else None
+    ilocal = dm.getPointSF().getGraph()[1] if migration is not None else None
     if ilocal is not None and len(ilocal):
         ghosts = np.asarray(ilocal)
         ghosts = ghosts[(ghosts >= v_start) & (ghosts < v_end)] - v_start
         owned[ghosts] = False
-    return LocalMesh(dm=dm, coords=coords, cells=local_cells.astype(np.int64), cell_data=cell_data.astype(np.int64),
-                     vert_data=vert_data.astype(np.int64), cell_serial=cell_serial, vert_serial=vert_serial,
-                     vert_owned=owned, v_start=v_start, migration=migration,
-                     n_global_cells=n_global[0], n_global_vertices=n_global[1])
+    fault = _face_values(*cells, FAULT_FACE)
+    fault_face = np.full(fault.shape, -1, np.int64)
+    if fault_keys is not None:
+        cell, k = np.nonzero(fault >= 0)
+        order = np.argsort(fault_keys)
+        fault_face[cell, k] = order[np.searchsorted(fault_keys[order], 4 * cell_serial[cell] + k)]
+    plus = _point_values(*cells, FAULT_SIDE, 0)
+    return LocalMesh(dm=dm, coords=dm.getCoordinatesLocal().getArray().reshape(-1, 3).copy(),
+                     cells=_local_cells(dm, c_start, c_end, v_start),
+                     cell_material=_point_values(*cells, MATERIAL, -1),
+                     cell_face_tag=_face_values(*cells, BOUNDARY_FACE),
+                     cell_side=(plus[:, None] >> np.arange(4)) & 1, cell_fault_face=fault_face,
+                     vert_constraint=_point_values(*verts, BOUNDARY_CONSTRAINT, 0),
+                     vert_ground=_point_values(*verts, GROUND_SURFACE, 0),
+                     vert_sides=1 + _point_values(*verts, FAULT_SPLIT, 0),
+                     vert_displacement_bc=_point_values(*verts, DISPLACEMENT_BOUNDARY, -1),
+                     cell_serial=cell_serial, vert_serial=serial_id[v_start:v_end] - nc, vert_owned=owned,
+                     v_start=v_start, migration=migration, n_global_cells=nc, n_global_vertices=nv)
+
+
+def _serial_labels(serial, cell_face_tag, vert_constraint, vert_ground, split):
+    """{label: (points, values)} on the serial mesh's points (cells [0, nc), vertices [nc, nc + nv)), for the
+    labels that hold points."""
+    nc, nv = len(serial.tets), len(serial.points)
+    out = {MATERIAL: (np.arange(nc), serial.cell_material)}
+    if cell_face_tag is not None:
+        cell, k = np.nonzero(np.asarray(cell_face_tag) >= 0)
+        out[BOUNDARY_FACE] = (cell, 4 * cell_face_tag[cell, k] + k)
+    if split is not None:
+        out[FAULT_FACE] = (split.minus_cell, 4 * split.fault_id + split.minus_lface)
+        plus = split.cell_side @ (1 << np.arange(4))
+        cell = np.flatnonzero(plus)
+        out[FAULT_SIDE] = (cell, plus[cell])
+    if vert_constraint is not None:
+        v = np.flatnonzero(vert_constraint)
+        out[BOUNDARY_CONSTRAINT] = (nc + v, vert_constraint[v])
+    if vert_ground is not None:
+        vg = np.asarray(vert_ground).reshape(nv, -1)
+        v = np.flatnonzero(vg[:, 0])
+        out[GROUND_SURFACE] = (nc + v, vg[v, 0])
+        if vg.shape[1] > 1:
+            v = np.flatnonzero(vg[:, 1] >= 0)
+            out[DISPLACEMENT_BOUNDARY] = (nc + v, vg[v, 1])
+    if split is not None:
+        v = np.flatnonzero(split.vert_sides > 1)
+        out[FAULT_SPLIT] = (nc + v, np.ones(len(v), np.int64))
+    return {name: out[name] for name in LABELS if name in out and len(out[name][0])}
+
+
+def _set_label(label, points, values):
+    """Give ``points`` their ``values`` in ``label``: one index set per value (a point may have several)."""
+    points, values = np.asarray(points, dtype=np.int64), np.asarray(values, dtype=np.int64)
+    order = np.lexsort((points, values))
+    points, values = points[order].astype(PETSc.IntType), values[order]
+    starts = np.flatnonzero(np.r_[True, values[1:] != values[:-1]])
+    for lo, hi in zip(starts, np.r_[starts[1:], len(values)]):
+        stratum = PETSc.IS().createGeneral(points[lo:hi], comm=PETSc.COMM_SELF)
+        label.setStratumIS(int(values[lo]), stratum)
+        stratum.destroy()
+
+
+def _strata(dm, start, end, name):
+    """(point - start, value) of every point of label ``name`` in [start, end), a row per value of a point."""
+    points, values = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    if dm.hasLabel(name):
+        label = dm.getLabel(name)
+        value_is = label.getValueIS()
+        for value in value_is.getIndices():
+            stratum = label.getStratumIS(value)
+            p = stratum.getIndices().astype(np.int64)
+            stratum.destroy()
+            p = p[(p >= start) & (p < end)]
+            points.append(p - start)
+            values.append(np.full(len(p), value, np.int64))
+        value_is.destroy()
+    return np.concatenate(points), np.concatenate(values)
+
+
+def _point_values(dm, start, end, name, absent):
+    """(end - start,) value of label ``name`` at points [start, end), ``absent`` where it has none."""
+    out = np.full(end - start, absent, np.int64)
+    points, values = _strata(dm, start, end, name)
+    out[points] = values
+    return out
+
+
+def _face_values(dm, start, end, name):
+    """(end - start, 4) index held by face label ``name`` (values 4 * index + k) at each cell's local face k,
+    -1 where it has none."""
+    out = np.full((end - start, 4), -1, np.int64)
+    points, values = _strata(dm, start, end, name)
+    out[points, values % 4] = values // 4
+    return out
+
+
+def _serial_points(migration, n):
+    """Serial point id of each local point: its root in the migration SF (all roots are on rank 0)."""
+    if migration is None:
+        return np.arange(n, dtype=np.int64)
+    _, ilocal, iremote = migration.getGraph()
+    iremote = np.asarray(iremote).reshape(-1, 2)
+    assert not np.any(iremote[:, 0]), "expected the serial mesh on rank 0"
+    out = np.full(n, -1, np.int64)
+    out[np.arange(n) if ilocal is None else np.asarray(ilocal)] = iremote[:, 1]
+    return out
+
+
+def _local_cells(dm, c_start, c_end, v_start):
+    """(nc, 4) local vertex indices of each cell, in the order the serial mesh gave them (DMPlex keeps cones)."""
+    cones = np.concatenate(list(map(dm.getCone, range(c_start, c_end)))) if c_end > c_start else np.zeros(0)
+    return cones.astype(np.int64).reshape(-1, 4) - v_start
 
 
 def _gather(mesh, values, offset, count):
