@@ -28,12 +28,16 @@ SCENE = "config/queretaro_calibrated.opts"
 MAXIMA = ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m")
 
 
-def run(size_factor, solver, ranks, out, extra):
-    """One run; returns its row (or the failure)."""
-    path = os.path.join(out, f"sf{size_factor:g}_{solver}")
-    cmd = ["mpirun", "-n", str(ranks), sys.executable, "-m", "pfault", SCENE, "-pfault_mesh_size_factor",
-           f"{size_factor:g}", "-pfault_solver", solver, "-pfault_output_dir", path, "-pfault_figures", "false",
-           *extra]
+def run(size_factor, solver, ranks, out, extra, scene=SCENE, name=None):
+    """One run of ``scene`` (size_factor None: the scene's own mesh, sized by ``extra`` if at all) into
+    OUT/NAME (default sf<size factor>_<solver>); returns its row (or the failure)."""
+    path = os.path.join(out, name or f"sf{size_factor:g}_{solver}")
+    size = [] if size_factor is None else ["-pfault_mesh_size_factor", f"{size_factor:g}"]
+    cmd = ["mpirun", "-n", str(ranks), sys.executable, "-m", "pfault", scene, *size, "-pfault_solver", solver,
+           "-pfault_output_dir", path, "-pfault_figures", "false", *extra]
+    stale = os.path.join(path, "summary.json")
+    if os.path.exists(stale):            # a run that fails early must not be read as the previous one
+        os.remove(stale)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, env=mpi_env(oversubscribe=True), capture_output=True, text=True)
     wall = time.perf_counter() - t0
