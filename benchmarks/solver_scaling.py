@@ -15,6 +15,7 @@ to OUT/report.md.
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import time
@@ -38,10 +39,15 @@ def run(size_factor, solver, ranks, out, extra, scene=SCENE, name=None):
     stale = os.path.join(path, "summary.json")
     if os.path.exists(stale):            # a run that fails early must not be read as the previous one
         os.remove(stale)
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, env=mpi_env(oversubscribe=True), capture_output=True, text=True)
     wall = time.perf_counter() - t0
-    row = {"size_factor": size_factor, "solver": solver, "ranks": ranks, "end_to_end_s": wall,
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    # CPU time of the ranks (user + system, every rank): on a shared machine less sensitive to the load
+    # than the wall time, though a rank that waits for another in MPI also counts its polling
+    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+    row = {"size_factor": size_factor, "solver": solver, "ranks": ranks, "end_to_end_s": wall, "cpu_s": cpu,
            "exit_code": proc.returncode}
     try:
         with open(os.path.join(path, "summary.json")) as fh:
