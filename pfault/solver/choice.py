@@ -1,0 +1,47 @@
+"""Which solver file a run applies when the scene leaves -pfault_solver at auto: the direct solver (MUMPS,
+config/solver/mumps.opts) on small systems, the iterative one (config/solver/iterative.opts) from the size
+where it is the faster, unless the scene's faults need the direct solver. Pure functions of what the scene
+asks for and how many unknowns its mesh gives."""
+
+from __future__ import annotations
+
+AUTO = "auto"
+DIRECT = "mumps"
+ITERATIVE = "iterative"
+
+# Global unknowns (displacements, both sides of split fault vertices, and Lagrange faces' multipliers: the
+# size of the solution vector, summary.json's "dofs") from which the iterative solver is chosen.
+# benchmarks/solver_crossover.py, 2 ranks, all steps, end-to-end wall time, the better of two interleaved
+# runs of each solver, MUMPS's time over the iterative solver's (benchmarks/README.md, "solver_crossover.py"):
+#   calibrated Queretaro 13,692 unknowns 0.81, 35,190 1.02, 82,902 1.90, 212,634 (paper size) 5.06;
+#   Wuxi 41,742 0.90, 136,935 1.43; demo box (no fault) 24,375 0.81, 78,033 1.45.
+# The two cross between 42,000 (Wuxi, MUMPS still 10 % faster) and 78,000 unknowns (the box, the iterative
+# solver 1.45 times faster), and are within 20 % of each other from 14,000 to 42,000 on every scene, where
+# MUMPS, which needs no Krylov convergence, is kept. The CPU times give the same order. Measured on 2 ranks
+# of one 2-core machine; on more ranks the crossover may move (the factorisation and the AMG scale apart).
+ITERATIVE_FROM_DOFS = 50_000
+
+
+def faults_need_direct(fault_settings):
+    """Whether a scene's faults rule out the iterative solver: a Lagrange fault without the traction-jump
+    stabilisation has no 3x3 face block for the Schur fieldsplit to eliminate its multipliers with
+    (pfault.solver.problem.configure_fieldsplit). Penalty faults add no unknowns: with penalty faults only,
+    the iterative solver is the displacement split's AMG on the stiffness and the penalty springs."""
+    return any(f.method == "lagrange" and not f.stabilization for f in fault_settings)
+
+
+def choose_solver(n_dofs, need_direct=False):
+    """DIRECT below ITERATIVE_FROM_DOFS global unknowns or where the faults need it, ITERATIVE from there."""
+    return DIRECT if need_direct or n_dofs < ITERATIVE_FROM_DOFS else ITERATIVE
+
+
+def solver_file_name(requested, n_dofs, fault_settings, pc_type_given=False):
+    """The -pfault_solver value a run applies (a name for pfault.solver.setup.apply_solver_file): the one the
+    user or the scene named, as it is; for ``auto`` the choice of ``choose_solver``, or none ("") when the user
+    chose the preconditioner with -pc_type and named no solver file (PETSc's options then steer the solver
+    alone, on the code defaults of pfault.solver.setup.apply_solver_defaults)."""
+    if requested != AUTO:
+        return requested
+    if pc_type_given:
+        return ""
+    return choose_solver(n_dofs, faults_need_direct(fault_settings))
