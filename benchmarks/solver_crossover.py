@@ -34,7 +34,7 @@ SOLVERS = ("mumps", "iterative")
 CASES = {
     "queretaro": ("config/queretaro_calibrated.opts",
                   [(f"sf {f:g}", f, []) for f in (3, 2, 1.5, 1)]),
-    "wuxi": ("config/wuxi.opts", [(f"sf {f:g}", f, []) for f in (1.5, 0.8)]),
+    "wuxi": ("config/wuxi.opts", [(f"sf {f:g}", f, []) for f in (1.5, 1, 0.8)]),
     # the demo scene's layered box (no fault, geostatic start): one linear solve per step
     "box": ("config/demo.opts", [(f"cells {c}", None, ["-pfault_box_cells", c]) for c in ("24,24,12", "36,36,18")]),
 }
@@ -55,6 +55,7 @@ def rel_diff(a, b):
 def measure(scene, label, size_factor, extra, repeat, ranks, out):
     """Both solvers ``repeat`` times, interleaved; returns the case's row."""
     runs = {s: [] for s in SOLVERS}
+    when = {"date": time.strftime("%Y-%m-%d %H:%M"), "uptime": [_uptime()]}
     for i in range(repeat):
         for solver in SOLVERS:
             load = os.getloadavg()[0]
@@ -66,7 +67,8 @@ def measure(scene, label, size_factor, extra, repeat, ranks, out):
                   + (f"failed: {r['error']}" if "error" in r else
                      f"{r['end_to_end_s']:.1f} s ({r['cpu_s']:.1f} s CPU), {r['dofs']:,} dofs, "
                      f"{r['newton_its']} Newton, {r['ksp_its']} Krylov, load {load:.2f}"), flush=True)
-    row = {"scene": scene, "size": label, "size_factor": size_factor, "extra": extra, "runs": runs}
+    when["uptime"].append(_uptime())
+    row = {"scene": scene, "size": label, "size_factor": size_factor, "extra": extra, "runs": runs, **when}
     if any("error" in r or not r.get("converged") for rs in runs.values() for r in rs):
         row["failed"] = True
         return row
@@ -125,12 +127,23 @@ def write(rows, meta, results):
     with open(os.path.join(results, "results.json"), "w") as fh:
         json.dump({"meta": meta, "rows": rows}, fh, indent=1)
     text = table(rows)
-    uptime = meta["uptime"]
+    runs = [meta]
+    while "merged_into" in runs[-1]:
+        runs.append(runs[-1]["merged_into"])
+    head = "\n\n".join(f"git {m['git']}, {m['date']}: `uptime` before {m['uptime'][0]}; after {m['uptime'][-1]}"
+                         for m in runs)
     with open(os.path.join(results, "report.md"), "w") as fh:
-        fh.write(f"# Solver crossover, git {meta['git']}, {meta['date']}, {meta['ranks']} ranks, "
-                 f"{meta['repeat']} runs of each solver interleaved\n\n`uptime` before: {uptime[0]}\n\n"
-                 f"`uptime` after: {uptime[-1]}\n\n{text}\n")
+        fh.write(f"# Solver crossover, {meta['ranks']} ranks, {meta['repeat']} runs of each solver interleaved\n\n"
+                 f"{head}\n\n(each row's runs: its \"date\" and \"uptime\" in results.json)\n\n{text}\n")
     return text
+
+
+def _merged(kept, rows):
+    """``rows`` in place of the rows of ``kept`` with their scene and size, in the order of CASES."""
+    new = {(r["scene"], r["size"]): r for r in rows}
+    both = {**{(r["scene"], r["size"]): r for r in kept}, **new}
+    order = [(scene, label) for scene, sizes in CASES.values() for label, _, _ in sizes]
+    return [both[k] for k in order if k in both] + [r for k, r in both.items() if k not in order]
 
 
 def main(argv=None):
@@ -141,6 +154,8 @@ def main(argv=None):
     p.add_argument("--out", default=os.path.join(ROOT, "runs", "solver_crossover"))
     p.add_argument("--results", default=os.path.join(HERE, "results", "solver_crossover"))
     p.add_argument("--report-only", action="store_true", help="rewrite RESULTS/report.md from RESULTS/results.json")
+    p.add_argument("--merge", action="store_true", help="keep RESULTS/results.json's rows of the scenes and sizes "
+                   "not run now (a rerun of some cases)")
     a = p.parse_args(argv)
     if a.report_only:
         with open(os.path.join(a.results, "results.json")) as fh:
@@ -153,6 +168,12 @@ def main(argv=None):
             "agree_rtol": AGREE_RTOL, "uptime": [_uptime()]}
     print(f"uptime: {meta['uptime'][0]}", flush=True)
     t0 = time.perf_counter()
+    kept = []
+    if a.merge:
+        with open(os.path.join(a.results, "results.json")) as fh:
+            old = json.load(fh)
+        kept = old["rows"]
+        meta["merged_into"] = old["meta"]
     rows = []
     for case in a.cases.split(","):
         scene, sizes = CASES[case]
@@ -161,7 +182,7 @@ def main(argv=None):
             rows.append(measure(scene, label, factor, extra, a.repeat, a.ranks, a.out))
             meta["uptime"].append(_uptime())
             meta["benchmark_s"] = time.perf_counter() - t0
-            text = write(rows, meta, a.results)
+            text = write(_merged(kept, rows), meta, a.results)
     print(f"uptime: {meta['uptime'][-1]}", flush=True)
     print(text)
     print(f"benchmark: {meta['benchmark_s']:.0f} s")
