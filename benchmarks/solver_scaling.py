@@ -15,6 +15,7 @@ to OUT/report.md.
 import argparse
 import json
 import os
+import resource
 import sys
 import time
 
@@ -27,14 +28,24 @@ SCENE = "config/queretaro_calibrated.opts"
 MAXIMA = ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m")
 
 
-def run(size_factor, solver, ranks, out, extra):
-    """One run; returns its row (or the failure)."""
-    path = os.path.join(out, f"sf{size_factor:g}_{solver}")
+def run(size_factor, solver, ranks, out, extra, scene=SCENE, name=None):
+    """One run of ``scene`` (size_factor None: the scene's own mesh, sized by ``extra`` if at all) into
+    OUT/NAME (default sf<size factor>_<solver>); returns its row (or the failure)."""
+    path = os.path.join(out, name or f"sf{size_factor:g}_{solver}")
+    size = [] if size_factor is None else ["-pfault_mesh_size_factor", f"{size_factor:g}"]
+    stale = os.path.join(path, "summary.json")
+    if os.path.exists(stale):            # a run that fails early must not be read as the previous one
+        os.remove(stale)
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    proc = run_captured(["-m", "pfault", SCENE, "-pfault_mesh_size_factor", f"{size_factor:g}", "-pfault_solver",
-                         solver, "-pfault_output_dir", path, "-pfault_figures", "false", *extra], ranks)
+    proc = run_captured(["-m", "pfault", scene, *size, "-pfault_solver", solver, "-pfault_output_dir", path,
+                         "-pfault_figures", "false", *extra], ranks)
     wall = time.perf_counter() - t0
-    row = {"size_factor": size_factor, "solver": solver, "ranks": ranks, "end_to_end_s": wall,
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    # CPU time of the ranks (user + system, every rank): on a shared machine less sensitive to the load
+    # than the wall time, though a rank that waits for another in MPI also counts its polling
+    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+    row = {"size_factor": size_factor, "solver": solver, "ranks": ranks, "end_to_end_s": wall, "cpu_s": cpu,
            "exit_code": proc.returncode}
     try:
         s = read_summary(path)

@@ -13,12 +13,12 @@ ITERATIVE = "iterative"
 # size of the solution vector, summary.json's "dofs") from which the iterative solver is chosen.
 # benchmarks/solver_crossover.py, 2 ranks, all steps, end-to-end wall time, the better of two interleaved
 # runs of each solver, MUMPS's time over the iterative solver's (benchmarks/README.md, "solver_crossover.py"):
-#   calibrated Queretaro 13,692 unknowns 0.81, 35,190 1.02, 82,902 1.90, 212,634 (paper size) ...;
-#   Wuxi 41,742 0.90, 136,935 1.43; demo box (no fault) 24,375 0.81, 78,033 1.45.
-# The two cross between 42,000 (Wuxi, MUMPS still 10 % faster) and 78,000 unknowns (the box, the iterative
-# solver 1.45 times faster), and are within 20 % of each other from 14,000 to 42,000 on every scene, where
-# MUMPS, which needs no Krylov convergence, is kept. The CPU times give the same order. Measured on 2 ranks
-# of one 2-core machine; on more ranks the crossover may move (the factorisation and the AMG scale apart).
+#   calibrated Queretaro 13,692 unknowns 0.81, 35,190 1.02, 82,902 1.90, 212,634 (paper size) 5.06;
+#   Wuxi 41,742 1.00, 84,411 (paper size) 1.18, 136,935 1.41; demo box (no fault) 24,375 0.81, 78,033 1.45.
+# The two cross between 42,000 (Wuxi, as fast) and 78,000 unknowns (the box, the iterative solver 1.45 times
+# faster), and are within 20 % of each other from 14,000 to 42,000 on every scene, where MUMPS, which needs
+# no Krylov convergence, is kept. The CPU times give the same order. Measured on 2 ranks of one 2-core
+# machine; on more ranks the crossover may move (the factorisation and the AMG scale apart).
 ITERATIVE_FROM_DOFS = 50_000
 
 
