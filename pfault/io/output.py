@@ -216,12 +216,14 @@ class XdmfSeries:
         self.close()
 
     def copy_steps(self, h5_path: str, last_step: int) -> None:
-        """Copy the steps up to ``last_step`` of another run's series (same mesh) into this one (restart)."""
+        """Copy the steps up to ``last_step`` of another run's series (same mesh) into this one (restart). A step
+        is chosen by its group's name (the step number, six digits), without opening the group: a run killed
+        outright while it wrote a later step may have left that group unreadable."""
         with open_h5(h5_path, "r") as old:
             if old["mesh/points"].shape != (self.n_points, 3) or len(old["mesh/cells"]) != self.n_cells:
                 raise ValueError(f"{h5_path}: the mesh differs from this run's")
             for key in sorted(old.get("steps", {})):
-                if int(old["steps"][key].attrs["step"]) <= last_step:
+                if int(key) <= last_step:
                     old.copy(old["steps"][key], self.h5.require_group("steps"), name=key)
                     self.entries.append(step_entry(self.h5["steps"][key]))
         self.h5.flush()
