@@ -81,8 +81,7 @@ def run_case(case, ranks=2, solver="mumps", size_factor=1.0, extra=(), timeout=7
     out = os.path.join(runs_dir, name)
     os.makedirs(os.path.join(REPO, out), exist_ok=True)
     args = [CASES[case], "-pfault_output_dir", out, "-log_view", f":{out}/log_view.txt", "-pfault_contact_monitor"]
-    if solver != "mumps":
-        args += ["-pfault_solver", solver]
+    args += ["-pfault_solver", solver]      # named always: the scenes' own choice is auto
     if float(size_factor) != 1.0:
         args += ["-pfault_mesh_size_factor", f"{float(size_factor):g}"]
     args += CASE_OPTIONS.get(case, []) + list(extra)
