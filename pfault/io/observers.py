@@ -89,7 +89,6 @@ class RunOutput:
         it continues. Nothing is written before this, and the output directory is replaced only after the first
         completed step (RunWriter.commit)."""
         from . import checkpoint, parallel as par
-        from .steps import StepOutput
         self.writer = run_on_root(self.comm, self._create_writer)
         # where the run writes, known to every rank: one that fails alone says there how the run ended
         w = self.writer
