@@ -1,7 +1,8 @@
 """The effects a scene asks for, decided once from what it sets, and what each of them cost.
 
 A scene builds only what it names: faults (each Lagrange or penalty) bring the multiplier field and the contact
-code; `-pfault_flow` the flow system and its KSP; per-material pressure tables the pore-pressure load; a
+code; `-pfault_flow` the flow system and its KSP; per-material pressure tables the pore-pressure load;
+`-pfault_heads_file` the reading of a groundwater model's heads and the pore-pressure load; a
 geostatic start the gravity solve and the initial stress; boundary tractions and prescribed displacements their
 loads. Every effect's work runs inside PETSc log events named here, so its cost (set-up and per step) is read
 from PETSc's log, not from timers of our own.
@@ -19,6 +20,7 @@ EVENTS = {
     "faults": ("pfaultFaultSetup", "pfaultFaultResidual", "pfaultFaultJacobian"),
     "flow": ("pfaultFlowAssemble", "pfaultFlowSolve", "pfaultPorePressureLoad"),
     "pressure_tables": ("pfaultPorePressureLoad",),
+    "heads": ("pfaultHeadsRead", "pfaultPorePressureLoad"),
     "geostatic": ("pfaultGeostatic",),
     "tractions": ("pfaultTractionLoad",),
     "displacements": ("pfaultDisplacementLoad",),
@@ -48,6 +50,7 @@ class Effects:
     geostatic: bool
     tractions: tuple       # surfaces with a non-zero traction
     displacements: tuple   # surfaces with prescribed displacements
+    heads: str = ""        # the groundwater model's head file (-pfault_heads_file), or ""
 
     def on(self, name):
         return bool(getattr(self, name))
@@ -60,27 +63,31 @@ class Effects:
             return "gravity solve, K0 initial stress" if v else ""
         if name == "flow":
             return "transient groundwater flow" if v else ""
+        if name == "heads":
+            return v
         return ", ".join(v)
 
     def line(self):
         """One line naming every effect and whether the scene asks for it."""
         label = {"faults": "faults", "flow": "groundwater flow", "pressure_tables": "pore-pressure tables",
                  "geostatic": "geostatic start", "tractions": "boundary tractions",
-                 "displacements": "prescribed displacements"}
+                 "displacements": "prescribed displacements",
+                 "heads": "groundwater-model heads"}
         parts = [f"{label[k]} {self.detail(k) if self.on(k) else 'off'}" for k in EVENTS]
         return "effects: " + "; ".join(parts)
 
 
-def decide(settings, materials, drawdown, flow, faults, boundaries):
+def decide(settings, materials, drawdown, flow, faults, boundaries, heads=""):
     """Effects of a scene from its settings: the material names, the drawdown tables, whether the flow model is
-    on, the fault settings and the boundary conditions."""
+    on, the fault settings, the boundary conditions and the head file of a groundwater model ("" without)."""
     tables = tuple(m.name for m, tab in zip(materials, drawdown.tables) if tab is not None)
     return Effects(faults=tuple((f.name, f.method) for f in faults), flow=bool(flow), pressure_tables=tables,
                    geostatic=bool(settings.geostatic),
                    tractions=tuple(b.name for b in boundaries
                                    if b.kind in ("traction", "displacement") and any(b.traction)),
                    displacements=tuple(b.name for b in boundaries
-                                       if b.kind == "displacement" and any(b.displacement)))
+                                       if b.kind == "displacement" and any(b.displacement)),
+                   heads=heads)
 
 
 def event_total(name, key="time"):

@@ -25,6 +25,7 @@ from .mesh import distributed
 from .solver.equations import Equations, constrained_local
 from .solver.choice import AUTO, ITERATIVE_FROM_DOFS, solver_file_name
 from .sources import FlowSource, TableSource
+from .sources.heads import build_heads_source, check_heads_files, read_heads_settings, read_mesh_origin
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,8 @@ class Scene:
     boundaries: list
     contact: Any                    # contact options (None without faults)
     effects: Any
+    heads_settings: Any = None      # a groundwater model's heads (pfault.sources.heads.HeadsSettings), or None
+    mesh_origin: tuple = (0.0, 0.0, 0.0)    # site coordinates = mesh coordinates + mesh_origin (m)
 
 
 @dataclass(frozen=True)
@@ -97,6 +100,16 @@ def _check_iterative_faults(fault_settings: list) -> None:
                              "use -pfault_solver mumps")
 
 
+def _check_one_pressure_source(heads: Any, drawdown: Any, flow: bool) -> None:
+    """The pore pressure comes from one place: the groundwater model's heads exclude tables and the flow model."""
+    if flow:
+        raise InputError(f"-pfault_heads_file {heads.file}: the pore pressure comes from these heads; remove "
+                         "-pfault_flow (or the head file)")
+    if drawdown.active:
+        raise InputError(f"-pfault_heads_file {heads.file}: the pore pressure comes from these heads; remove the "
+                         "per-material head_drawdown/pressure_change tables (or the head file)")
+
+
 def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     """The scene's settings (every rank) and the serial mesh (rank 0; None elsewhere)."""
     s = scn.read_settings(reader, options_file)
@@ -112,6 +125,10 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     if solver_name and solver_name != AUTO:
         from .solver.setup import find_solver_file
         find_solver_file(solver_name, options_file)         # a file that is not there: an error before meshing
+    mesh_origin = read_mesh_origin(reader)
+    heads_settings = read_heads_settings(reader, s.water_density, s.gravity, mesh_origin, options_file)
+    if heads_settings is not None:
+        run_on_root(comm, check_heads_files, heads_settings, s.time_end)     # before meshing: fail fast
     build_serial = scn.generator_options(reader, s, index_bytes=np.dtype(PETSc.IntType).itemsize)
     serial = run_on_root(comm, build_serial)
     names = comm.tompi4py().bcast((serial.material_names, sorted(serial.surfaces)) if comm.rank == 0 else None)
@@ -119,6 +136,8 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     scn.check_ground_surface(reader, s, surface_names)
     materials = scn.read_materials(reader, material_names)
     drawdown = scn.read_drawdown(reader, material_names, s.water_density, s.gravity)
+    if heads_settings is not None:
+        _check_one_pressure_source(heads_settings, drawdown, reader.get("pfault_flow"))
     flow_settings = None
     if reader.get("pfault_flow"):
         from .solver.flow import read_flow_settings
@@ -132,9 +151,11 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     boundaries = scn.read_boundaries(reader, surface_names, exclude=fault_names)
     contact = scn.read_contact_options(reader) if fault_names else None
     reader.check_pfault_options()
-    effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries)
+    effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries,
+                             heads=heads_settings.file if heads_settings is not None else "")
     scene = Scene(s, restart_dir, figures, solver_name, material_names, surface_names,
-                  materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects)
+                  materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects,
+                  heads_settings, mesh_origin)
     return scene, serial
 
 
@@ -161,7 +182,11 @@ def _serial_arrays(scene: Scene, serial: Any) -> tuple:
 
 
 def _source(scene: Scene, mesh: Any) -> Any:
-    """The pore-pressure source: the flow model, or the per-material tables."""
+    """The pore-pressure source: the flow model, a groundwater model's heads, or the per-material tables."""
+    if scene.heads_settings is not None:
+        with logged("pfaultHeadsRead"):
+            centroids = mesh.coords[mesh.cells].mean(axis=1)
+            return build_heads_source(mesh.dm.getComm(), scene.heads_settings, centroids)
     if scene.flow_settings is None:
         return TableSource(scene.drawdown, mesh.cell_material)
     from .solver.flow import FIXED_HEAD_BIT, GroundwaterFlow

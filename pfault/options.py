@@ -140,6 +140,26 @@ SPECS = [
     _s("pfault_flow_fixed_head_surfaces", "names", "", "", "physical surfaces held at h = 0 (others are "
        "no-flow)"),
     _s("pfault_flow_substeps", "int", 1, "", "backward-Euler flow steps per mechanical time step"),
+    # pore pressure from a site's groundwater model
+    _s("pfault_heads_file", "string", "", "", "heads saved by the site's groundwater model: a MODFLOW 6 binary "
+       "head file (with -pfault_heads_grid), or heads / pressure changes at times on a regular grid or on points in "
+       "HDF5 or NetCDF-4 (.h5, .nc; layout in README); each cell takes the value at its centroid, linear in time "
+       "between saved times, dp = rho_w g (h - h_ref) (instead of per-material tables or -pfault_flow)"),
+    _s("pfault_heads_grid", "string", "", "", "binary grid file of the MODFLOW 6 model that wrote "
+       "-pfault_heads_file (MODEL.dis.grb or MODEL.disv.grb): cells, layer elevations, IDOMAIN, XORIGIN, YORIGIN, "
+       "ANGROT"),
+    _s("pfault_heads_time_unit", "string", "day", "", "unit of the times in -pfault_heads_file (MODFLOW's "
+       "TIME_UNITS: s, minute, hour, day, year, or a number of seconds); the time 0 of the file is pfault's; an "
+       "HDF5/NetCDF file's time units attribute is used when present"),
+    _s("pfault_heads_length_unit", "quantity", 1.0, "m", "length unit of the MODFLOW model (its grid and heads): "
+       "1 for metres, 0.3048 for feet"),
+    _s("pfault_heads_reference_time", "quantity", None, "s", "saved time of -pfault_heads_file whose heads are "
+       "h_ref, the state pfault's initial state stands for (default: the first saved time)"),
+    _s("pfault_heads_outside", "choice", "error", "", "mesh cells whose centroid is outside the groundwater model "
+       "(beyond its extent, above its top, below its bottom, or in an inactive cell): error, or zero (no "
+       "pore-pressure change there)", choices=("error", "zero")),
+    _s("pfault_mesh_origin", "list", "0,0,0", "m", "site coordinates of the mesh's origin: site = mesh + origin "
+       "(the coordinates of the groundwater model and of other site data)"),
     # time
     _s("pfault_time_end", "quantity", 1.0, "s", "end time (units allowed, e.g. 10*year)"),
     _s("pfault_time_steps", "int", 1, "", "number of equal time steps"),

@@ -1,0 +1,227 @@
+"""Head files of a site's groundwater model: MODFLOW 6 binary heads with their grid file (read with flopy), and
+pfault's generic HDF5 / NetCDF-4 layout (read with h5py). Each reader gives the saved times (in the file's
+time unit), a spatial lookup for points of the mesh (pfault.sources.lookup) and the values at saved time i as a
+flat array; a file that cannot be used raises InputError naming the file and the fix.
+
+The generic layout (README "Pore pressure from a groundwater model", docs/site_models.md):
+
+- ``time`` (nt,): the saved times, increasing; attribute ``units`` (``s``, ``day``, ``year``, or CF's
+  ``days since 2000-01-01``) or -pfault_heads_time_unit;
+- ``head`` (m) or ``pressure_change`` (Pa): values (nt, ...);
+- on a regular grid: ``x`` (nx,), ``y`` (ny,), optionally ``z`` (nz,), increasing, values (nt, [nz,] ny, nx);
+- on scattered points in the plane: ``points`` (n, 2), values (nt, n), applied at every depth.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..sources import lookup
+
+
+def _need(path: str, option: str) -> None:
+    if not os.path.isfile(path):
+        raise InputError(f"-{option} {path}: no such file")
+
+
+@dataclass(frozen=True)
+class Mf6Grid:
+    """A DIS or DISV grid from a MODFLOW 6 binary grid file, lengths in the model's unit."""
+    kind: str                   # DIS | DISV
+    nlay: int
+    ncpl: int
+    shape: tuple                # (nlay, nrow, ncol) or (nlay, ncpl): the shape of a saved head array
+    top: np.ndarray             # (ncpl,)
+    botm: np.ndarray            # (nlay, ncpl)
+    idomain: np.ndarray         # (nlay, ncpl)
+    xorigin: float
+    yorigin: float
+    angrot: float
+    delr: np.ndarray | None = None
+    delc: np.ndarray | None = None
+    vertices: np.ndarray | None = None
+    iavert: np.ndarray | None = None
+    javert: np.ndarray | None = None
+
+    def cells(self, points: np.ndarray) -> np.ndarray:
+        """Flat cell number (layer * ncpl + cell2d; -1 outside) of points (n, 3) in the model's coordinates."""
+        x, y = lookup.to_model_xy(points[:, 0], points[:, 1], self.xorigin, self.yorigin, self.angrot)
+        if self.kind == "DIS":
+            c2d = lookup.structured_cell(self.delr, self.delc, x, y)
+        else:
+            c2d = lookup.polygon_cell(self.vertices, self.iavert, self.javert, x, y)
+        k = lookup.layer_of(self.top, self.botm, c2d, points[:, 2])
+        return np.where(k >= 0, k * self.ncpl + c2d, -1)
+
+
+def read_mf6_grid(path: str) -> Mf6Grid:
+    _need(path, "pfault_heads_grid")
+    from flopy.mf6.utils import MfGrdFile
+    try:
+        g = MfGrdFile(path)
+        kind = g.grid_type
+    except Exception as exc:  # noqa: BLE001  (flopy raises whatever its parser meets)
+        raise InputError(f"-pfault_heads_grid {path}: not a MODFLOW 6 binary grid file ({type(exc).__name__}: "
+                         f"{exc}); give the .dis.grb or .disv.grb file MODFLOW 6 writes beside the model") from None
+    if kind not in ("DIS", "DISV"):
+        raise InputError(f"-pfault_heads_grid {path}: a {kind} grid; pfault reads DIS and DISV grids (a DISU "
+                         "model's heads can be given in the generic HDF5 layout)")
+    nlay = int(g.nlay)
+    ncpl = int(g.nrow) * int(g.ncol) if kind == "DIS" else int(g.ncpl)
+    common = dict(kind=kind, nlay=nlay, ncpl=ncpl, top=np.asarray(g.top, float).ravel(),
+                  botm=np.asarray(g.bot, float).reshape(nlay, ncpl),
+                  idomain=np.asarray(g.idomain).reshape(nlay, ncpl), xorigin=float(g.xorigin),
+                  yorigin=float(g.yorigin), angrot=float(g.angrot))
+    if kind == "DIS":
+        return Mf6Grid(shape=(nlay, int(g.nrow), int(g.ncol)), delr=np.asarray(g.delr, float),
+                       delc=np.asarray(g.delc, float), **common)
+    return Mf6Grid(shape=(nlay, ncpl), vertices=np.asarray(g.verts, float), iavert=np.asarray(g.iavert),
+                   javert=np.asarray(g.javert), **common)
+
+
+def scaled(grid: Mf6Grid, length: float) -> Mf6Grid:
+    """The grid in metres when its lengths are in units of ``length`` m (feet: 0.3048)."""
+    if length == 1.0:
+        return grid
+    from dataclasses import replace
+    return replace(grid, top=grid.top * length, botm=grid.botm * length, xorigin=grid.xorigin * length,
+                   yorigin=grid.yorigin * length,
+                   delr=None if grid.delr is None else grid.delr * length,
+                   delc=None if grid.delc is None else grid.delc * length,
+                   vertices=None if grid.vertices is None else grid.vertices * length)
+
+
+class Mf6Heads:
+    """The saved heads of a MODFLOW 6 head file whose grid is ``grid``: ``times`` (model time unit) and
+    ``values(i)`` (flat, layer by layer)."""
+
+    def __init__(self, path: str, grid: Mf6Grid, grid_path: str) -> None:
+        _need(path, "pfault_heads_file")
+        import flopy
+        self.path = path
+        try:
+            self.file = flopy.utils.HeadFile(path, precision="auto")
+            records = self.file.recordarray
+        except Exception as exc:  # noqa: BLE001  (flopy raises whatever its parser meets)
+            raise InputError(f"-pfault_heads_file {path}: not a MODFLOW head file ({type(exc).__name__}: {exc}); "
+                             "give the binary head file of the model's output control (HEAD FILEOUT)") from None
+        nrow, ncol = (grid.shape[1], grid.shape[2]) if grid.kind == "DIS" else (1, grid.ncpl)
+        dims = {(int(r), int(c)) for r, c in zip(records["nrow"], records["ncol"])}
+        if dims != {(nrow, ncol)} or int(records["ilay"].max()) > grid.nlay:
+            got = ", ".join(f"{r} x {c}" for r, c in sorted(dims))
+            raise InputError(f"-pfault_heads_file {path}: its records are {got} (rows x columns) in up to "
+                             f"{int(records['ilay'].max())} layers, but the grid file {grid_path} has "
+                             f"{grid.nlay} layers of {nrow} x {ncol}; give the grid file of the model that wrote "
+                             "these heads")
+        totim = np.asarray(records["totim"], float)
+        change = np.concatenate([[True], totim[1:] != totim[:-1]])
+        times = totim[change]
+        back = np.nonzero(np.diff(times) <= 0)[0]
+        if len(back):
+            i = back[0]
+            raise InputError(f"-pfault_heads_file {path}: its saved times are not increasing (time {times[i + 1]:g} "
+                             f"after {times[i]:g}); give the head file of one run, its records in time order")
+        per_time = np.diff(np.concatenate([np.nonzero(change)[0], [len(totim)]]))
+        if np.any(per_time != grid.nlay):
+            i = int(np.nonzero(per_time != grid.nlay)[0][0])
+            raise InputError(f"-pfault_heads_file {path}: time {times[i]:g} has {per_time[i]} layer records, the "
+                             f"grid {grid.nlay}; save the heads of every layer (output control SAVE HEAD ALL)")
+        self.times = times
+        self.shape = grid.shape
+
+    def values(self, i: int) -> np.ndarray:
+        a = np.asarray(self.file.get_data(totim=self.times[i]), float).ravel()
+        if np.isnan(a).any():
+            raise InputError(f"-pfault_heads_file {self.path}: {int(np.isnan(a).sum())} heads are NaN at time "
+                             f"{self.times[i]:g}; MODFLOW writes dry cells as -1e30 and inactive ones as 1e30: "
+                             "give the file MODFLOW wrote, or mark such cells that way")
+        return a
+
+    def close(self) -> None:
+        self.file.close()
+
+
+class TableHeads:
+    """The generic HDF5 / NetCDF-4 layout (module docstring): ``times`` (in ``time_unit`` s when the file says
+    so, else None), ``quantity`` (``head`` or ``pressure_change``), ``weights(points)`` and ``values(i)``."""
+
+    def __init__(self, path: str) -> None:
+        _need(path, "pfault_heads_file")
+        import h5py
+        self.path = path
+        try:
+            self.file = h5py.File(path, "r")
+        except OSError as exc:
+            raise InputError(f"-pfault_heads_file {path}: not an HDF5 or NetCDF-4 file ({exc}); give a MODFLOW "
+                             "head file with -pfault_heads_grid, or the layout in README") from None
+        f = self.file
+        found = [q for q in ("head", "pressure_change") if q in f]
+        if len(found) != 1 or "time" not in f:
+            self._bad("needs a 'time' dataset and one of 'head' (m) or 'pressure_change' (Pa)")
+        self.quantity = found[0]
+        self.times = np.asarray(f["time"][...], float).ravel()
+        self.time_unit = _unit_seconds(f["time"].attrs.get("units"), path)
+        self.data = f[self.quantity]
+        if len(self.times) == 0 or np.any(~np.isfinite(self.times)):
+            self._bad("'time' is empty or holds NaN")
+        back = np.nonzero(np.diff(self.times) <= 0)[0]
+        if len(back):
+            i = back[0]
+            self._bad(f"'time' is not increasing ({self.times[i + 1]:g} after {self.times[i]:g}); sort the records")
+        if "points" in f:
+            self.nodes = np.asarray(f["points"][...], float)
+            self.axes = None
+            if self.nodes.ndim != 2 or self.nodes.shape[1] != 2 or len(self.nodes) < 3:
+                self._bad("'points' must be (n, 2), x and y of at least 3 points")
+            expect = (len(self.times), len(self.nodes))
+        else:
+            names = [a for a in ("x", "y", "z") if a in f]
+            if names[:2] != ["x", "y"]:
+                self._bad("needs 'points' (n, 2) or the grid axes 'x', 'y' (and 'z')")
+            self.axes = [np.asarray(f[a][...], float).ravel() for a in names]
+            for a, ax in zip(names, self.axes):
+                if len(ax) == 0 or np.any(np.diff(ax) <= 0) or np.any(~np.isfinite(ax)):
+                    self._bad(f"axis '{a}' must be finite and increasing")
+            expect = (len(self.times),) + tuple(len(ax) for ax in self.axes[::-1])
+        if tuple(self.data.shape) != expect:
+            self._bad(f"'{self.quantity}' is {tuple(self.data.shape)}, the times and axes ask for {expect}")
+
+    def _bad(self, what: str) -> None:
+        raise InputError(f"-pfault_heads_file {self.path}: {what} (layout: README, 'Pore pressure from a "
+                         "groundwater model')")
+
+    def weights(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.axes is None:
+            return lookup.scattered_weights(self.nodes, points[:, :2])
+        return lookup.regular_grid_weights(self.axes, points[:, :len(self.axes)])
+
+    def values(self, i: int) -> np.ndarray:
+        a = np.asarray(self.data[i], float).ravel()
+        if not np.all(np.isfinite(a)):
+            self._bad(f"'{self.quantity}' holds {int(np.sum(~np.isfinite(a)))} NaN or infinite values at time "
+                      f"{self.times[i]:g}; give a value everywhere (no-data is not allowed)")
+        return a
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def _unit_seconds(units, path: str) -> float | None:
+    """Seconds per unit of a ``units`` attribute (``day``, ``s``, ``years since 2000-01-01``), None if absent."""
+    if units is None:
+        return None
+    if isinstance(units, bytes):
+        units = units.decode()
+    word = str(units).split(" since ")[0].strip().lower()
+    word = {"seconds": "s", "second": "s", "sec": "s", "days": "day", "years": "year", "hours": "hour",
+            "minutes": "minute", "d": "day"}.get(word, word)
+    from ..units import parse_quantity
+    try:
+        return parse_quantity(f"1*{word}", "time units", "s")
+    except InputError:
+        raise InputError(f"-pfault_heads_file {path}: time units '{units}' are not a time unit pfault knows "
+                         "(s, minute, hour, day, year); fix the attribute 'units' of 'time'") from None

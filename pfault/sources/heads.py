@@ -1,0 +1,261 @@
+"""Pore pressure from a site's groundwater model: heads saved at times by MODFLOW 6 (a binary head file and the
+model's binary grid file) or pressure changes / heads in pfault's generic HDF5 layout (pfault.io.head_files).
+
+Each cell of the mesh takes the value at its centroid, in site coordinates (mesh coordinates plus
+-pfault_mesh_origin): the head of the MODFLOW cell that contains it, or the interpolant of the generic layout.
+The pore-pressure change at saved time t_i is
+
+    dp_i = rho_w g (h_i - h_ref)            h_ref the head at the reference time (the first saved time unless
+                                            -pfault_heads_reference_time names another saved time)
+
+and between saved times dp is linear in time (before the first saved time it is that time's). A MODFLOW cell
+that is dry (head -1e30) holds water at atmospheric pressure: pore pressure 0, so dp = -rho_w g max(h_ref - z, 0)
+at the centroid's elevation z (and rho_w g max(h - z, 0) when it was dry at the reference time and is wet
+again; 0 when dry at both). A cell that is inactive in the model (IDOMAIN <= 0, head 1e30) is not part of the
+groundwater model: it counts as outside, like a centroid beyond the model's extent, and outside cells are an
+error unless -pfault_heads_outside zero says that their pore pressure does not change. Generic files with
+``pressure_change`` are used as they are (no reference subtracted).
+
+The map cell -> model cell and its weights is computed once; the values at every saved time are then gathered
+for this rank's cells only (every rank reads the whole file, once: reading costs each rank the file's size in
+I/O; it keeps nt x (its cells) values).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from mpi4py import MPI
+
+from ..errors import InputError, collective_check, run_on_all
+from ..units import UNITS, parse_quantity
+
+OUTSIDE_ERROR, OUTSIDE_ZERO = "error", "zero"
+DRY = -1e29             # MODFLOW 6 writes a dry cell's head as -1e30 (DHDRY): at or below this, dry
+INACTIVE = 1e29         # and an inactive cell's as 1e30 (DHNOFLO)
+
+
+@dataclass(frozen=True)
+class HeadsSettings:
+    file: str
+    grid: str                       # MODFLOW binary grid file ('' for the generic layout)
+    time_unit: float                # seconds per unit of the file's times
+    time_unit_given: bool
+    length_unit: float              # metres per unit of a MODFLOW model's lengths
+    reference_time: float | None    # s; None: the first saved time
+    outside: str                    # error | zero
+    origin: tuple                   # site coordinates of the mesh's (0, 0, 0), m
+    water_density: float
+    gravity: float
+
+
+def _seconds_per(text: str, option: str) -> float:
+    """A time unit given as a word (day, days, year, s) or a quantity (86400, 1*day), in seconds."""
+    word = text.strip()
+    for w in (word, word[:-1] if word.endswith("s") else word):
+        if w in UNITS and UNITS[w][1] == UNITS["s"][1]:
+            return UNITS[w][0]
+    value = parse_quantity(text, option, "s")
+    if value <= 0:
+        raise InputError(f"-{option} {text}: give a positive time unit, e.g. day or 86400")
+    return value
+
+
+def read_mesh_origin(reader: Any) -> tuple:
+    """-pfault_mesh_origin x,y,z: site coordinates = mesh coordinates + origin (m)."""
+    origin = reader.get("pfault_mesh_origin")
+    if len(origin) != 3:
+        raise InputError(f"-pfault_mesh_origin: give three coordinates x,y,z (m), got {len(origin)}")
+    return tuple(float(v) for v in origin)
+
+
+def _beside(path: str, scene_file: str) -> str:
+    """A file named relative to the working directory, or else to the scene file's directory."""
+    if not path or os.path.isabs(path) or os.path.exists(path) or not scene_file:
+        return path
+    other = os.path.join(os.path.dirname(scene_file), path)
+    return os.path.normpath(other) if os.path.exists(other) else path
+
+
+def read_heads_settings(reader: Any, water_density: float, gravity: float, origin: tuple = (0.0, 0.0, 0.0),
+                        scene_file: str = "") -> HeadsSettings | None:
+    """The settings of -pfault_heads_file, or None when it is not given (its companions are then unused). The
+    files are found from the working directory or, failing that, beside the scene file."""
+    path = _beside(reader.get("pfault_heads_file"), scene_file)
+    if not path:
+        return None
+    grid = _beside(reader.get("pfault_heads_grid"), scene_file)
+    if not grid and not re.search(r"\.(h5|hdf5|nc|nc4|cdf)$", path, re.IGNORECASE):
+        raise InputError(f"-pfault_heads_file {path}: a MODFLOW head file needs its binary grid file, "
+                         "-pfault_heads_grid MODEL.dis.grb (or .disv.grb); an HDF5/NetCDF-4 file ends in .h5 or .nc")
+    given = reader.has("pfault_heads_time_unit")
+    time_unit = _seconds_per(reader.get("pfault_heads_time_unit"), "pfault_heads_time_unit")
+    length = reader.get("pfault_heads_length_unit")
+    if length <= 0:
+        raise InputError(f"-pfault_heads_length_unit: give a positive length, e.g. 0.3048 for feet, got {length:g}")
+    return HeadsSettings(file=path, grid=grid, time_unit=time_unit, time_unit_given=given, length_unit=length,
+                         reference_time=reader.get("pfault_heads_reference_time"),
+                         outside=reader.get("pfault_heads_outside"), origin=tuple(origin),
+                         water_density=water_density, gravity=gravity)
+
+
+def open_heads(settings: HeadsSettings) -> tuple[Any, Any]:
+    """(the head file's reader, the MODFLOW grid or None); the reader's ``times`` in seconds as ``seconds``."""
+    from ..io import head_files
+    if settings.grid:
+        grid = head_files.scaled(head_files.read_mf6_grid(settings.grid), settings.length_unit)
+        heads = head_files.Mf6Heads(settings.file, grid, settings.grid)
+        heads.seconds = heads.times * settings.time_unit
+        return heads, grid
+    heads = head_files.TableHeads(settings.file)
+    unit = heads.time_unit if heads.time_unit is not None else settings.time_unit
+    if heads.time_unit is not None and settings.time_unit_given and abs(unit - settings.time_unit) > 1e-12 * unit:
+        heads.close()
+        raise InputError(f"-pfault_heads_time_unit contradicts the units of 'time' in {settings.file}; "
+                         "remove the option (the file's units are used)")
+    heads.seconds = heads.times * unit
+    return heads, None
+
+
+def reference_index(settings: HeadsSettings, seconds: np.ndarray) -> int:
+    if settings.reference_time is None:
+        return 0
+    tol = 1e-9 * max(abs(seconds[-1]), 1.0)
+    hit = np.nonzero(np.abs(seconds - settings.reference_time) <= tol)[0]
+    if not len(hit):
+        shown = ", ".join(f"{t / settings.time_unit:g}" for t in seconds[:8]) + (", ..." if len(seconds) > 8 else "")
+        raise InputError(f"-pfault_heads_reference_time {settings.reference_time:g} s is not a time saved in "
+                         f"{settings.file} (saved, in units of {settings.time_unit:g} s: {shown}); give one of them")
+    return int(hit[0])
+
+
+def check_heads_files(settings: HeadsSettings, time_end: float) -> None:
+    """Every check the files allow before the mesh exists: they open, match, their times increase, the
+    reference time is saved, and the run ends within the saved times."""
+    heads, _ = open_heads(settings)
+    try:
+        reference_index(settings, heads.seconds)
+        last = heads.seconds[-1]
+        if time_end > last * (1 + 1e-12) + 1e-9:
+            raise InputError(f"-pfault_time_end {time_end:g} s is after the last time saved in {settings.file} "
+                             f"({last:g} s); end the run by then or give heads up to its end")
+    finally:
+        heads.close()
+
+
+class HeadsSource:
+    """dp per local cell at the saved times (``table``, nt x cells, Pa) at ``seconds``, linear in between."""
+
+    has_state = False       # a function of time: nothing to checkpoint
+
+    def __init__(self, seconds: np.ndarray, table: np.ndarray) -> None:
+        self.seconds = np.asarray(seconds, float)
+        self.table = table
+
+    @property
+    def active(self) -> bool:
+        return True
+
+    def advance_to(self, t: float) -> None:
+        """The saved heads are known at every time: nothing to do."""
+
+    def cell_dp(self, t: float) -> np.ndarray:
+        s = self.seconds
+        if len(s) == 1 or t <= s[0]:
+            return self.table[0].copy()
+        if t >= s[-1]:
+            return self.table[-1].copy()
+        i = int(np.searchsorted(s, t, side="right")) - 1
+        theta = (t - s[i]) / (s[i + 1] - s[i])
+        return (1.0 - theta) * self.table[i] + theta * self.table[i + 1]
+
+    def step_record(self) -> dict:
+        return {}
+
+    def vertex_head(self) -> None:
+        return None
+
+    def destroy(self) -> None:
+        pass
+
+
+def _mf6_table(heads: Any, grid: Any, points: np.ndarray, ref: int, rho_g: float,
+               length: float) -> tuple[np.ndarray, np.ndarray]:
+    """(dp table nt x n, outside mask) for points (n, 3, site coordinates, m) in a MODFLOW model whose lengths
+    are in units of ``length`` m."""
+    cell = grid.cells(points)
+    outside = cell < 0
+    outside[~outside] |= grid.idomain.ravel()[cell[~outside]] <= 0
+    take = np.where(outside, 0, cell)
+    h = np.empty((len(heads.times), len(points)))
+    for i in range(len(heads.times)):
+        h[i] = heads.values(i)[take]
+    outside |= np.any(h >= INACTIVE, axis=0)           # inactive (HNOFLO) at some time
+    dry = h <= DRY
+    h *= length
+    z = points[:, 2]
+    href = h[ref]
+    wet_now = np.where(dry, 0.0, h - z)                 # pressure head where wet
+    table = rho_g * np.where(dry[ref][None, :],
+                             np.where(dry, 0.0, np.maximum(wet_now, 0.0)),
+                             np.where(dry, -np.maximum(href - z, 0.0)[None, :], h - href[None, :]))
+    table[:, outside] = 0.0
+    return table, outside
+
+
+def _generic_table(heads: Any, points: np.ndarray, ref: int, rho_g: float) -> tuple[np.ndarray, np.ndarray]:
+    index, weight = heads.weights(points)
+    outside = index[:, 0] < 0
+    take = np.where(index < 0, 0, index)
+    v = np.empty((len(heads.times), len(points)))
+    for i in range(len(heads.times)):
+        v[i] = np.sum(heads.values(i)[take] * weight, axis=1)
+    table = rho_g * (v - v[ref]) if heads.quantity == "head" else v
+    table[:, outside] = 0.0
+    return table, outside
+
+
+def build_heads_source(comm: Any, settings: HeadsSettings, centroids: np.ndarray) -> HeadsSource:
+    """Collective: the source for this rank's cells (centroids in mesh coordinates). Cells outside the
+    groundwater model are an InputError on every rank unless -pfault_heads_outside zero."""
+    points = centroids + np.asarray(settings.origin)[None, :]
+    rho_g = settings.water_density * settings.gravity
+
+    def read():
+        heads, grid = open_heads(settings)
+        try:
+            ref = reference_index(settings, heads.seconds)
+            if grid is not None:
+                table, outside = _mf6_table(heads, grid, points, ref, rho_g, settings.length_unit)
+            else:
+                table, outside = _generic_table(heads, points, ref, rho_g)
+            return heads.seconds.copy(), table, outside
+        finally:
+            heads.close()
+
+    seconds, table, outside = run_on_all(comm, read)
+    _check_outside(comm, settings, points, outside)
+    return HeadsSource(seconds, table)
+
+
+def _check_outside(comm: Any, settings: HeadsSettings, points: np.ndarray, outside: np.ndarray) -> None:
+    mpi = comm.tompi4py()
+    n_out = mpi.allreduce(int(outside.sum()), op=MPI.SUM)
+    if n_out == 0 or settings.outside == OUTSIDE_ZERO:
+        return
+    n_all = mpi.allreduce(len(points), op=MPI.SUM)
+    p = points[outside]
+    lo = mpi.allreduce(p.min(axis=0) if len(p) else np.full(3, np.inf), op=MPI.MIN)
+    hi = mpi.allreduce(p.max(axis=0) if len(p) else np.full(3, -np.inf), op=MPI.MAX)
+    where = ", ".join(f"{a} {lo[i]:.6g}..{hi[i]:.6g}" for i, a in enumerate("xyz"))
+    kind = "outside the groundwater model or in its inactive cells" if settings.grid else \
+        "outside the extent of the file's grid or points"
+    collective_check(comm, f"-pfault_heads_file {settings.file}: {n_out:,} of {n_all:,} mesh cells have their "
+                           f"centroid {kind} (site coordinates {where} m); place the mesh with "
+                           "-pfault_mesh_origin, or say what they get: -pfault_heads_outside zero (no pore-pressure "
+                           "change there)")
+
