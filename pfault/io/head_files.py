@@ -15,6 +15,7 @@ The generic layout (README "Pore pressure from a groundwater model", docs/site_m
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,7 +63,9 @@ def read_mf6_grid(path: str) -> Mf6Grid:
     _need(path, "pfault_heads_grid")
     from flopy.mf6.utils import MfGrdFile
     try:
-        g = MfGrdFile(path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            g = MfGrdFile(path)
         kind = g.grid_type
     except Exception as exc:  # noqa: BLE001  (flopy raises whatever its parser meets)
         raise InputError(f"-pfault_heads_grid {path}: not a MODFLOW 6 binary grid file ({type(exc).__name__}: "
@@ -104,7 +107,9 @@ class Mf6Heads:
         import flopy
         self.path = path
         try:
-            self.file = flopy.utils.HeadFile(path, precision="auto")
+            with warnings.catch_warnings():             # a file that is not a head file makes flopy warn first
+                warnings.simplefilter("ignore")
+                self.file = flopy.utils.HeadFile(path, precision="auto")
             records = self.file.recordarray
         except Exception as exc:  # noqa: BLE001  (flopy raises whatever its parser meets)
             raise InputError(f"-pfault_heads_file {path}: not a MODFLOW head file ({type(exc).__name__}: {exc}); "

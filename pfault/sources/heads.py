@@ -243,14 +243,15 @@ def build_heads_source(comm: Any, settings: HeadsSettings, centroids: np.ndarray
 
 
 def _check_outside(comm: Any, settings: HeadsSettings, points: np.ndarray, outside: np.ndarray) -> None:
-    mpi = comm.tompi4py()
+    mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
     n_out = mpi.allreduce(int(outside.sum()), op=MPI.SUM)
     if n_out == 0 or settings.outside == OUTSIDE_ZERO:
         return
     n_all = mpi.allreduce(len(points), op=MPI.SUM)
     p = points[outside]
-    lo = mpi.allreduce(p.min(axis=0) if len(p) else np.full(3, np.inf), op=MPI.MIN)
-    hi = mpi.allreduce(p.max(axis=0) if len(p) else np.full(3, -np.inf), op=MPI.MAX)
+    lo, hi = np.empty(3), np.empty(3)
+    mpi.Allreduce(p.min(axis=0) if len(p) else np.full(3, np.inf), lo, op=MPI.MIN)
+    mpi.Allreduce(p.max(axis=0) if len(p) else np.full(3, -np.inf), hi, op=MPI.MAX)
     where = ", ".join(f"{a} {lo[i]:.6g}..{hi[i]:.6g}" for i, a in enumerate("xyz"))
     kind = "outside the groundwater model or in its inactive cells" if settings.grid else \
         "outside the extent of the file's grid or points"
