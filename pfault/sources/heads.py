@@ -197,14 +197,24 @@ def _mf6_table(heads: Any, grid: Any, points: np.ndarray, ref: int, rho_g: float
     outside |= np.any(h >= INACTIVE, axis=0)           # inactive (HNOFLO) at some time
     dry = h <= DRY
     h *= length
-    z = points[:, 2]
-    href = h[ref]
-    wet_now = np.where(dry, 0.0, h - z)                 # pressure head where wet
-    table = rho_g * np.where(dry[ref][None, :],
-                             np.where(dry, 0.0, np.maximum(wet_now, 0.0)),
-                             np.where(dry, -np.maximum(href - z, 0.0)[None, :], h - href[None, :]))
+    table = h - h[ref][None, :]
+    table *= rho_g
+    if dry.any():
+        _dry_cells(table, h, dry, ref, points[:, 2], rho_g)
     table[:, outside] = 0.0
     return table, outside
+
+
+def _dry_cells(table: np.ndarray, h: np.ndarray, dry: np.ndarray, ref: int, z: np.ndarray, rho_g: float) -> None:
+    """dp where a cell is dry now or at the reference: its pore pressure is atmospheric (0) then, and the wet
+    pore pressure at the other time rho_w g max(h - z, 0) at the centroid's elevation z."""
+    cols = np.nonzero(dry.any(axis=0))[0]
+    p = rho_g * np.maximum(h[:, cols] - z[None, cols], 0.0)
+    p[dry[:, cols]] = 0.0
+    either = dry[:, cols] | dry[ref, cols][None, :]
+    sub = table[:, cols]
+    sub[either] = (p - p[ref][None, :])[either]
+    table[:, cols] = sub
 
 
 def _generic_table(heads: Any, points: np.ndarray, ref: int, rho_g: float) -> tuple[np.ndarray, np.ndarray]:
