@@ -201,7 +201,10 @@ class TableHeads:
 
     def weights(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.axes is None:
-            return lookup.scattered_weights(self.nodes, points[:, :2])
+            try:
+                return lookup.scattered_weights(self.nodes, points[:, :2])
+            except (ValueError, RuntimeError):
+                self._bad("'points' cannot be triangulated; give distinct points, not all on one line")
         return lookup.regular_grid_weights(self.axes, points[:, :len(self.axes)])
 
     def values(self, i: int) -> np.ndarray:
