@@ -573,6 +573,10 @@ def make_figures(run_dir: str, step: int = -1) -> list[str]:
     paths.append(histories_figure(run_dir))
     if has_surface(run_dir):
         paths.append(hazard_figure(run_dir, step=step))
+    from .insar import insar_figure
+    insar = insar_figure(run_dir)       # the LOS raster's last time (-pfault_insar_los)
+    if insar is not None:
+        paths.append(insar)
     return paths
 
 

@@ -1,0 +1,275 @@
+"""The land surface's line-of-sight (LOS) displacement on a raster, as InSAR measures it: ``-pfault_insar_los
+e,n,u`` (the unit vector from the ground to the satellite, east, north and up components) and
+``-pfault_insar_spacing`` (pixel size, m).
+
+At time 0 and at every output time, LOS = e ux + n uy + u uz of the displacement relative to the initial state,
+positive towards the satellite (uplift seen from above is positive; subsidence negative), at the centre of every
+pixel of a regular grid over the land surface (-pfault_ground_surface), and its rate between consecutive output
+times. Pixels are squares aligned on multiples of the spacing in site coordinates (pfault.io.probes.mesh_to_site);
+a pixel takes the value, in the P1 basis, of the surface triangle under its centre, on the side of a fault trace
+its triangle lies; pixels whose centre is outside the land surface are no-data.
+
+``insar_los.nc`` (CF-1.8 NetCDF-4, readable by GDAL/QGIS, xarray and the netCDF library): coordinates ``x``,
+``y`` (m, site coordinates) and ``time`` (s from the start of the scene), variables ``los_displacement`` (m) and
+``los_velocity`` (m s-1; no-data at the first time) on (time, y, x), with _FillValue at pixels outside the land
+surface, and ``step`` (the step number of each time). The figure ``insar_los.png`` maps the last time's LOS
+displacement and velocity. A restart keeps the times of the run it continues up to its checkpoint's step.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, run_on_root
+from ..mesh.serial import TET_FACES, locate_faces
+from .observers import Observer
+from .probes import Located, PointProbe, mesh_to_site
+
+NC_NAME = "insar_los.nc"
+PNG_NAME = "insar_los.png"
+FILL = -9999.0          # _FillValue of the pixels outside the land surface
+UNIT_TOL = 1e-3         # |los| within this of 1 is a unit vector (rounded direction cosines); it is normalised
+
+
+@dataclass(frozen=True)
+class InsarSettings:
+    los: np.ndarray             # (3,) unit vector east, north, up from the ground to the satellite
+    spacing: float | None       # pixel size (m); None: the mean edge length of the land surface's triangles
+
+
+def read_insar_settings(reader: Any) -> InsarSettings | None:
+    """-pfault_insar_los and -pfault_insar_spacing (every rank); None without a LOS vector."""
+    los = reader.get("pfault_insar_los")
+    if not los:
+        return None
+    text = ",".join(f"{v:g}" for v in los)
+    if len(los) != 3:
+        raise InputError(f"-pfault_insar_los {text}: give three components e,n,u of the unit vector from the ground "
+                         "to the satellite (e.g. -0.61,-0.11,0.78)")
+    v = np.array(los, dtype=np.float64)
+    norm = float(np.linalg.norm(v))
+    if abs(norm - 1.0) > UNIT_TOL:
+        raise InputError(f"-pfault_insar_los {text}: not a unit vector (length {norm:.4g}); give the east, north, "
+                         "up components of the unit vector from the ground to the satellite (e.g. -0.61,-0.11,0.78)")
+    spacing = reader.get("pfault_insar_spacing")
+    if spacing is not None and not spacing > 0:
+        raise InputError(f"-pfault_insar_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
+    return InsarSettings(v / norm, spacing)
+
+
+@dataclass(frozen=True)
+class Raster:
+    x: np.ndarray               # (nx,) pixel centres, site coordinates
+    y: np.ndarray               # (ny,) ascending
+    inside: np.ndarray          # (ny, nx) bool: the pixel's centre is on the land surface
+
+
+def ground_faces(serial: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(cell, local face) of the land surface's triangles in the serial mesh: those of the physical surface
+    ``name``, or the faces on the plane z = max z when the mesh has no such surface (pfault.io.hazard's rule)."""
+    tri = serial.surfaces.get(name)
+    if tri is not None and len(tri):
+        t, cell, lface = locate_faces(serial.tets, len(serial.points), tri)
+        _, first = np.unique(t, return_index=True)
+        return cell[first], lface[first]
+    z = serial.points[:, 2]
+    on = np.abs(z - z.max()) <= 1e-9 * max(float(np.ptp(serial.points, axis=0).max()), 1.0)
+    faces = serial.tets[:, TET_FACES]                               # (nc, 4, 3)
+    cell, lface = np.nonzero(on[faces].all(axis=2))
+    return cell, lface
+
+
+def locate_pixels(serial: Any, ground: str, spacing: float | None) -> tuple[Raster, Located]:
+    """Rank 0: the raster over the land surface and, for each pixel inside it (in row-major order of
+    ``inside``), the tetrahedron under the surface triangle below its centre and the P1 weights there."""
+    import matplotlib.tri as mtri
+    cell, lface = ground_faces(serial, ground)
+    if not len(cell):
+        raise InputError(f"-pfault_insar_los: the mesh has no land surface (-pfault_ground_surface {ground}, nor "
+                         "faces on its top plane) to map")
+    local = TET_FACES[lface]                                        # (m, 3) local vertices of each triangle
+    tri = serial.tets[cell[:, None], local]
+    xy = mesh_to_site(serial.points[:, :2])
+    p = xy[tri]
+    area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
+    flat = np.abs(area) > 1e-9 * np.abs(area).max()                 # vertical triangles cover no pixel
+    cell, local, tri = cell[flat], local[flat], tri[flat]
+    if spacing is None:
+        edges = np.linalg.norm(xy[tri] - xy[np.roll(tri, 1, axis=1)], axis=2)
+        spacing = float(edges.mean())
+    verts, inv = np.unique(tri, return_inverse=True)
+    inv = inv.reshape(-1, 3)
+    lo, hi = xy[verts].min(axis=0), xy[verts].max(axis=0)
+    first = np.floor(lo / spacing + 1e-9) * spacing
+    count = np.maximum(np.ceil((hi - first) / spacing - 1e-9).astype(np.int64), 1)
+    x = first[0] + spacing * (np.arange(count[0]) + 0.5)
+    y = first[1] + spacing * (np.arange(count[1]) + 0.5)
+    px, py = np.meshgrid(x, y)
+    tr = mtri.Triangulation(xy[verts, 0], xy[verts, 1], inv)
+    found = tr.get_trifinder()(px.ravel(), py.ravel())
+    inside = found >= 0
+    k = found[inside]
+    q = np.column_stack([px.ravel()[inside], py.ravel()[inside]])
+    a, b, c = xy[tri[k, 0]], xy[tri[k, 1]], xy[tri[k, 2]]
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+    l1 = ((q[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (q[:, 1] - a[:, 1])) / det
+    l2 = ((b[:, 0] - a[:, 0]) * (q[:, 1] - a[:, 1]) - (q[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])) / det
+    weights = np.zeros((len(k), 4))
+    rows = np.arange(len(k))[:, None]
+    weights[rows, local[k]] = np.column_stack([1.0 - l1 - l2, l1, l2])
+    located = Located(cell[k].astype(np.int64), weights, np.zeros(len(k), np.int64))
+    return Raster(x, y, inside.reshape(px.shape)), located
+
+
+class InsarSeries:
+    """The LOS raster of a run (rank 0): maps kept in memory, ``insar_los.nc`` rewritten whole (a temporary file
+    renamed over it) after every output time."""
+
+    def __init__(self, raster: Raster, los: np.ndarray) -> None:
+        self.raster, self.los = raster, los
+        self.steps: list[int] = []
+        self.times: list[float] = []
+        self.maps: list[np.ndarray] = []
+
+    def start(self, directory: str, restart_dir: str | None, restart_step: int | None) -> None:
+        if restart_dir:
+            self._continue(restart_dir, int(restart_step or 0))
+        else:
+            self.steps, self.times, self.maps = [0], [0.0], [np.where(self.raster.inside, 0.0, np.nan)]
+        write_netcdf(os.path.join(directory, NC_NAME), self.raster, self.los, self.steps, self.times, self.maps)
+
+    def _continue(self, run_dir: str, last_step: int) -> None:
+        path = os.path.join(run_dir, NC_NAME)
+        if not os.path.exists(path):
+            raise InputError(f"-pfault_insar_los: the run in -pfault_restart {run_dir} has no LOS raster ({NC_NAME}); "
+                             "continue it without -pfault_insar_los, or run the scene from the start with it")
+        old = read_netcdf(path)
+        same = (np.array_equal(old["x"], self.raster.x) and np.array_equal(old["y"], self.raster.y)
+                and np.allclose(old["los"], self.los, rtol=0, atol=1e-12))
+        if not same:
+            raise InputError(f"-pfault_insar_los: the LOS vector or the pixels differ from those of the run in "
+                             f"-pfault_restart {run_dir}; give the -pfault_insar_los and -pfault_insar_spacing it had")
+        keep = old["step"] <= last_step
+        self.steps = [int(s) for s in old["step"][keep]]
+        self.times = [float(t) for t in old["time"][keep]]
+        self.maps = list(old["los_displacement"][keep])
+
+    def append(self, directory: str, step: int, t: float, u: np.ndarray) -> None:
+        """``u`` (k, 3): the displacement at the pixels inside the land surface."""
+        full = np.full(self.raster.inside.shape, np.nan)
+        full[self.raster.inside] = u @ self.los
+        self.steps.append(int(step))
+        self.times.append(float(t))
+        self.maps.append(full)
+        write_netcdf(os.path.join(directory, NC_NAME), self.raster, self.los, self.steps, self.times, self.maps)
+
+
+def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: list, times: list, maps: list) -> None:
+    """``insar_los.nc`` (CF-1.8, NetCDF-4 through h5netcdf), written into ``path``.tmp and renamed."""
+    import h5netcdf
+    import pfault
+    disp = np.array(maps, dtype=np.float64)
+    t = np.array(times, dtype=np.float64)
+    rate = np.full_like(disp, np.nan)
+    if len(t) > 1:
+        rate[1:] = (disp[1:] - disp[:-1]) / (t[1:] - t[:-1])[:, None, None]
+    tmp = path + ".tmp"
+    with h5netcdf.File(tmp, "w") as nc:
+        nc.attrs.update({
+            "Conventions": "CF-1.8", "title": "line-of-sight displacement of the land surface",
+            "source": f"pfault {pfault.__version__}",
+            "los_unit_vector_enu": los.astype(np.float64),
+            "comment": "LOS = e ux + n uy + u uz of the displacement relative to the initial state, positive "
+                       "towards the satellite (e, n, u: unit vector from the ground to the satellite); pixels "
+                       "outside the land surface hold _FillValue; x, y in site coordinates (m)"})
+        nc.dimensions = {"time": len(t), "y": len(raster.y), "x": len(raster.x)}
+        for name, values, axis in (("x", raster.x, "X"), ("y", raster.y, "Y")):
+            v = nc.create_variable(name, (name,), np.float64, data=values)
+            v.attrs.update({"standard_name": f"projection_{name}_coordinate", "units": "m", "axis": axis,
+                            "long_name": f"{name} of the pixel centre (site coordinates)"})
+        v = nc.create_variable("time", ("time",), np.float64, data=t)
+        v.attrs.update({"units": "s", "axis": "T", "long_name": "time from the start of the scene"})
+        v = nc.create_variable("step", ("time",), np.int64, data=np.array(steps, dtype=np.int64))
+        v.attrs["long_name"] = "pfault step number of the output time"
+        for name, values, units, long in (
+                ("los_displacement", disp, "m", "line-of-sight displacement relative to the initial state, "
+                                                "positive towards the satellite"),
+                ("los_velocity", rate, "m s-1", "line-of-sight velocity between the previous output time and this "
+                                                "one, positive towards the satellite")):
+            data = np.where(np.isnan(values), FILL, values)
+            v = nc.create_variable(name, ("time", "y", "x"), np.float64, data=data, fillvalue=FILL)
+            v.attrs.update({"units": units, "long_name": long})
+    os.replace(tmp, path)
+
+
+def read_netcdf(path: str) -> dict[str, np.ndarray]:
+    """The arrays of an ``insar_los.nc`` (no-data as NaN)."""
+    import h5netcdf
+    with h5netcdf.File(path, "r") as nc:
+        out = {k: nc.variables[k][()] for k in ("x", "y", "time", "step", "los_displacement", "los_velocity")}
+        out["los"] = np.asarray(nc.attrs["los_unit_vector_enu"], dtype=np.float64)
+    for k in ("los_displacement", "los_velocity"):
+        out[k] = np.where(out[k] == FILL, np.nan, out[k])
+    return out
+
+
+def insar_figure(run_dir: str) -> str | None:
+    """``insar_los.png``: the last output time's LOS displacement (mm) and velocity (mm/yr); None without a
+    raster."""
+    path = os.path.join(run_dir, NC_NAME)
+    if not os.path.exists(path):
+        return None
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from ..units import YEAR
+    from .observers import format_time
+    d = read_netcdf(path)
+    dx = d["x"][1] - d["x"][0] if len(d["x"]) > 1 else 1.0
+    dy = d["y"][1] - d["y"][0] if len(d["y"]) > 1 else 1.0
+    extent = (d["x"][0] - dx / 2, d["x"][-1] + dx / 2, d["y"][0] - dy / 2, d["y"][-1] + dy / 2)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), constrained_layout=True)
+    panels = ((d["los_displacement"][-1] * 1e3, "LOS displacement (mm)"),
+              (d["los_velocity"][-1] * 1e3 * YEAR, "LOS velocity (mm/yr, since the previous output)"))
+    for ax, (values, label) in zip(axes, panels):
+        lim = float(np.nanmax(np.abs(values))) if np.isfinite(values).any() else 1.0
+        im = ax.imshow(values, origin="lower", extent=extent, cmap="RdBu_r", vmin=-lim or -1, vmax=lim or 1)
+        fig.colorbar(im, ax=ax, label=label)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_aspect("equal")
+    e, n, u = d["los"]
+    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; LOS (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), positive towards "
+                 "the satellite")
+    out = os.path.join(run_dir, PNG_NAME)
+    fig.savefig(out + ".tmp", dpi=120, format="png")
+    plt.close(fig)
+    os.replace(out + ".tmp", out)
+    return out
+
+
+class InsarObserver(Observer):
+    """Observer of the time loop (pfault.run): the LOS raster at time 0 (or the times of the run a restart
+    continues) and at every output time of a converged step."""
+
+    def __init__(self, output: Any, raster: Raster | None, located: Located, los: np.ndarray) -> None:
+        m = output.model
+        self.output, self.comm = output, m.comm
+        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
+        self.series = InsarSeries(raster, los) if m.comm.rank == 0 else None
+        self.started = False
+
+    def step_done(self, result: Any) -> None:
+        out = self.output
+        if not self.started:
+            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
+            self.started = True
+        if not (result.output and result.record["converged"]):
+            return
+        u = self.probe.values(result.u_rel)
+        run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))

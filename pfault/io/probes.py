@@ -1,0 +1,128 @@
+"""The displacement at given points of the mesh (stations, the pixels of an InSAR raster), in the P1 basis of
+the tetrahedron that contains each point.
+
+Points are located once, on rank 0, in the serial mesh (partition-independent: the same cell and weights on any
+number of ranks); each rank then evaluates the points whose cell it holds, from its local displacement, and
+rank 0 sums the parts (every point is evaluated by exactly one rank, the others add zeros).
+
+A point on a face shared by several cells takes the cell with the smallest serial id among them (the values
+agree there, the P1 field being continuous), except on a fault: there the two sides differ, and the point takes
+the side it asks for (minus by default: the side the fault's normal points away from, pfault.mesh.fault).
+
+Coordinates: pfault's outputs and inputs of points are in site coordinates, which ``mesh_to_site`` maps to and
+from the mesh's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+# barycentric coordinates down to -INSIDE_TOL count as inside a cell (a point on a face or an edge is in all
+# the cells around it); the same tolerance says on which fault vertices a point has weight
+INSIDE_TOL = 1e-9
+
+SIDE_NAMES = ("", "minus", "plus")      # side codes: 0 not on a fault, 1 minus, 2 plus
+
+
+def mesh_to_site(xyz: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """Site coordinates of points in mesh coordinates ((n, 3) or (n, 2) x, y); ``inverse``: mesh coordinates of
+    points in site coordinates. Site = mesh + origin, with the origin zero until -pfault_mesh_origin is wired
+    here: every coordinate a station file gives and every coordinate pfault writes for stations and rasters
+    goes through this function."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    origin = np.zeros(3)[:xyz.shape[-1]]
+    return xyz - origin if inverse else xyz + origin
+
+
+@dataclass(frozen=True)
+class Located:
+    """Points located in the serial mesh: serial ``cell`` (-1: outside the mesh), the P1 ``weights`` (n, 4) of
+    the cell's vertices at the point, and the fault ``side`` taken (0 not on a fault, 1 minus, 2 plus)."""
+    cell: np.ndarray
+    weights: np.ndarray
+    side: np.ndarray
+
+
+def barycentric(x: np.ndarray, verts: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (m, 4) of the point x (3,) in the tetrahedra ``verts`` (m, 4, 3)."""
+    t = np.transpose(verts[:, 1:] - verts[:, :1], (0, 2, 1))
+    lam = np.linalg.solve(t, (x - verts[:, 0])[:, :, None])[:, :, 0]
+    return np.column_stack([1.0 - lam.sum(axis=1), lam])
+
+
+def locate_points(points: np.ndarray, tets: np.ndarray, xyz: np.ndarray, vert_sides: np.ndarray | None = None,
+                  cell_side: np.ndarray | None = None, plus: np.ndarray | None = None) -> Located:
+    """Locate the points ``xyz`` (n, 3, mesh coordinates) in the serial mesh (``points``, ``tets``); with faults,
+    ``vert_sides`` and ``cell_side`` are the fault split's (pfault.mesh.fault.FaultSplit) and ``plus`` (n,) bool
+    says which points on a fault take its plus side. Rank 0, NumPy only; one pass over the cells' bounding
+    boxes per point."""
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    n = len(xyz)
+    corners = points[tets]
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    pad = 1e-9 * max(float(np.ptp(points, axis=0).max()), 1.0)
+    cell = np.full(n, -1, np.int64)
+    weights = np.zeros((n, 4))
+    side = np.zeros(n, np.int64)
+    want_plus = np.zeros(n, bool) if plus is None else np.asarray(plus, bool)
+    for i, x in enumerate(xyz):
+        cand = np.flatnonzero(np.all((lo - pad <= x) & (x <= hi + pad), axis=1))
+        if not len(cand):
+            continue
+        lam = barycentric(x, corners[cand])
+        inside = np.all(lam >= -INSIDE_TOL, axis=1)
+        cand, lam = cand[inside], lam[inside]
+        if not len(cand):
+            continue
+        code = _sides(tets[cand], lam, vert_sides, cell_side, cand)
+        if (code == 1).any() and (code == 2).any():       # on a fault: the side asked for
+            keep = code == (2 if want_plus[i] else 1)
+            cand, lam, side[i] = cand[keep], lam[keep], 2 if want_plus[i] else 1
+        j = int(np.argmin(cand))
+        cell[i], weights[i] = cand[j], lam[j]
+    return Located(cell, weights, side)
+
+
+def _sides(tets, lam, vert_sides, cell_side, cells):
+    """Per candidate cell: 0 when the point has no weight on a split fault vertex of it, else 1 (the cell uses
+    the minus-side copies of those vertices) or 2 (the plus-side ones)."""
+    if vert_sides is None:
+        return np.zeros(len(tets), np.int64)
+    split = (vert_sides[tets] > 1) & (lam > INSIDE_TOL)
+    plus = (cell_side[cells] == 1) & split
+    return np.where(split.any(axis=1), np.where(plus.any(axis=1), 2, 1), 0)
+
+
+class PointProbe:
+    """Evaluates the displacement at located points on the distributed mesh. ``located`` (the same on every
+    rank) holds every point's serial cell and weights; ``mesh`` and ``dofmap`` are the local mesh and its
+    dofs. Collective."""
+
+    def __init__(self, comm: Any, mesh: Any, dofmap: Any, located: Located) -> None:
+        self.mpi = comm.tompi4py()
+        self.n = len(located.cell)
+        order = np.argsort(mesh.cell_serial)
+        pos = np.minimum(np.searchsorted(mesh.cell_serial[order], located.cell), max(len(order) - 1, 0))
+        local = order[pos] if len(order) else np.zeros(self.n, np.int64)
+        mine = (located.cell >= 0) & (mesh.cell_serial[local] == located.cell) if len(order) else \
+            np.zeros(self.n, bool)
+        self.index = np.flatnonzero(mine)
+        self.dofs = dofmap.cell_dofs[local[mine]].reshape(-1, 4, 3)     # the cell's side of a split vertex
+        self.weights = located.weights[mine]
+        count = self.mpi.allreduce(mine.astype(np.int64))
+        if np.any(count[located.cell >= 0] != 1):
+            raise RuntimeError("a located point is held by no rank or by several")
+
+    def values(self, u_local: np.ndarray) -> np.ndarray | None:
+        """(n, 3) displacement at the points on rank 0 (None elsewhere) from each rank's local array."""
+        part = np.zeros((self.n, 3))
+        part[self.index] = np.einsum("mk,mkc->mc", self.weights, u_local[self.dofs])
+        if self.mpi.size == 1:
+            return part
+        from mpi4py import MPI
+        total = np.zeros_like(part) if self.mpi.rank == 0 else None
+        self.mpi.Reduce(part, total, op=MPI.SUM, root=0)
+        return total
