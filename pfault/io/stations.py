@@ -50,7 +50,8 @@ def read_stations(path: str) -> Stations:
     """The stations of the CSV file ``path`` (InputError, naming the file and the fix, on anything wrong)."""
     where = f"{OPTION} {path}"
     if not os.path.isfile(path):
-        raise InputError(f"{where}: no such file; give a CSV file whose {COLUMNS_FIX}")
+        raise InputError(f"{where}: no such file; give a CSV file whose first line names the columns "
+                         "name,x,y,z (and optionally side), then one station per line")
     try:
         with open(path, newline="") as fh:
             rows = [(i + 1, r) for i, r in enumerate(csv.reader(fh))
