@@ -25,9 +25,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, run_on_root
-from ..mesh.serial import TET_FACES, locate_faces
 from .observers import Observer
-from .probes import Located, PointProbe, mesh_to_site
+from .probes import Located, PointProbe, Raster, locate_pixels
 
 NC_NAME = "insar_los.nc"
 PNG_NAME = "insar_los.png"
@@ -59,71 +58,6 @@ def read_insar_settings(reader: Any) -> InsarSettings | None:
     if spacing is not None and not spacing > 0:
         raise InputError(f"-pfault_insar_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
     return InsarSettings(v / norm, spacing)
-
-
-@dataclass(frozen=True)
-class Raster:
-    x: np.ndarray               # (nx,) pixel centres, site coordinates
-    y: np.ndarray               # (ny,) ascending
-    inside: np.ndarray          # (ny, nx) bool: the pixel's centre is on the land surface
-
-
-def ground_faces(serial: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(cell, local face) of the land surface's triangles in the serial mesh: those of the physical surface
-    ``name``, or the faces on the plane z = max z when the mesh has no such surface (pfault.io.hazard's rule)."""
-    tri = serial.surfaces.get(name)
-    if tri is not None and len(tri):
-        t, cell, lface = locate_faces(serial.tets, len(serial.points), tri)
-        _, first = np.unique(t, return_index=True)
-        return cell[first], lface[first]
-    z = serial.points[:, 2]
-    on = np.abs(z - z.max()) <= 1e-9 * max(float(np.ptp(serial.points, axis=0).max()), 1.0)
-    faces = serial.tets[:, TET_FACES]                               # (nc, 4, 3)
-    cell, lface = np.nonzero(on[faces].all(axis=2))
-    return cell, lface
-
-
-def locate_pixels(serial: Any, ground: str, spacing: float | None) -> tuple[Raster, Located]:
-    """Rank 0: the raster over the land surface and, for each pixel inside it (in row-major order of
-    ``inside``), the tetrahedron under the surface triangle below its centre and the P1 weights there."""
-    import matplotlib.tri as mtri
-    cell, lface = ground_faces(serial, ground)
-    if not len(cell):
-        raise InputError(f"-pfault_insar_los: the mesh has no land surface (-pfault_ground_surface {ground}, nor "
-                         "faces on its top plane) to map")
-    local = TET_FACES[lface]                                        # (m, 3) local vertices of each triangle
-    tri = serial.tets[cell[:, None], local]
-    xy = mesh_to_site(serial.points[:, :2])
-    p = xy[tri]
-    area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
-                  - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
-    flat = np.abs(area) > 1e-9 * np.abs(area).max()                 # vertical triangles cover no pixel
-    cell, local, tri = cell[flat], local[flat], tri[flat]
-    if spacing is None:
-        edges = np.linalg.norm(xy[tri] - xy[np.roll(tri, 1, axis=1)], axis=2)
-        spacing = float(edges.mean())
-    verts, inv = np.unique(tri, return_inverse=True)
-    inv = inv.reshape(-1, 3)
-    lo, hi = xy[verts].min(axis=0), xy[verts].max(axis=0)
-    first = np.floor(lo / spacing + 1e-9) * spacing
-    count = np.maximum(np.ceil((hi - first) / spacing - 1e-9).astype(np.int64), 1)
-    x = first[0] + spacing * (np.arange(count[0]) + 0.5)
-    y = first[1] + spacing * (np.arange(count[1]) + 0.5)
-    px, py = np.meshgrid(x, y)
-    tr = mtri.Triangulation(xy[verts, 0], xy[verts, 1], inv)
-    found = tr.get_trifinder()(px.ravel(), py.ravel())
-    inside = found >= 0
-    k = found[inside]
-    q = np.column_stack([px.ravel()[inside], py.ravel()[inside]])
-    a, b, c = xy[tri[k, 0]], xy[tri[k, 1]], xy[tri[k, 2]]
-    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
-    l1 = ((q[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (q[:, 1] - a[:, 1])) / det
-    l2 = ((b[:, 0] - a[:, 0]) * (q[:, 1] - a[:, 1]) - (q[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])) / det
-    weights = np.zeros((len(k), 4))
-    rows = np.arange(len(k))[:, None]
-    weights[rows, local[k]] = np.column_stack([1.0 - l1 - l2, l1, l2])
-    located = Located(cell[k].astype(np.int64), weights, np.zeros(len(k), np.int64))
-    return Raster(x, y, inside.reshape(px.shape)), located
 
 
 class InsarSeries:
