@@ -178,8 +178,8 @@ def insar_figure(run_dir: str) -> str | None:
         ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
     e, n, u = d["los"]
-    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; LOS (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), positive towards "
-                 "the satellite")
+    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; LOS (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), "
+                 "positive towards the satellite")
     out = os.path.join(run_dir, PNG_NAME)
     fig.savefig(out + ".tmp", dpi=120, format="png")
     plt.close(fig)

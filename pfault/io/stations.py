@@ -176,7 +176,8 @@ class StationSeries:
             t = h5.create_dataset("time", data=np.array(self.times, dtype=np.float64).reshape(-1, 1, 1))
             t.attrs["units"] = "s"
             h5.create_dataset("step", data=np.array(self.steps, dtype=np.int64))
-            d = h5.create_dataset("vertex_fields/displacement", data=np.array(self.values).reshape(-1, len(st.names), 3))
+            values = np.array(self.values).reshape(-1, len(st.names), 3)
+            d = h5.create_dataset("vertex_fields/displacement", data=values)
             d.attrs["units"] = "m"
             d.attrs["vector_field_type"] = "vector"
             d.attrs["description"] = "displacement relative to the initial state (x, y, z)"

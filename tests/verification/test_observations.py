@@ -110,7 +110,7 @@ def test_stations_report_the_p1_interpolant_and_the_fault_side_they_ask_for(tmp_
         _, u = station_series(rows, name)
         assert np.allclose(u[-1], value, rtol=0, atol=1e-12)
         assert np.abs(u[-1]).max() > 1e-3
-    on = p1_values(out, np.array([1.0, 0.43, -0.57]), summary["mesh"]["nodes"])          # cells on both sides of the fault
+    on = p1_values(out, np.array([1.0, 0.43, -0.57]), summary["mesh"]["nodes"])    # cells on both sides of the fault
     plus = [v for v, p in on.values() if p]
     minus = [v for v, p in on.values() if not p]
     assert plus and minus
