@@ -61,23 +61,23 @@ def read_insar_settings(reader: Any) -> InsarSettings | None:
 
 
 class InsarSeries:
-    """The LOS raster of a run (rank 0): maps kept in memory, ``insar_los.nc`` rewritten whole (a temporary file
-    renamed over it) after every output time."""
+    """The LOS raster of a run (rank 0): ``insar_los.nc`` made whole at the start (time 0, or the times of the run
+    a restart continues), then one time appended in place per output time (the file is closed after each, so a
+    reader sees every time written). The last map and its time are kept for the velocity."""
 
     def __init__(self, raster: Raster, los: np.ndarray) -> None:
         self.raster, self.los = raster, los
-        self.steps: list[int] = []
-        self.times: list[float] = []
-        self.maps: list[np.ndarray] = []
+        self.last: tuple[float, np.ndarray] | None = None
 
     def start(self, directory: str, restart_dir: str | None, restart_step: int | None) -> None:
         if restart_dir:
-            self._continue(restart_dir, int(restart_step or 0))
+            steps, times, maps = self._continue(restart_dir, int(restart_step or 0))
         else:
-            self.steps, self.times, self.maps = [0], [0.0], [np.where(self.raster.inside, 0.0, np.nan)]
-        write_netcdf(os.path.join(directory, NC_NAME), self.raster, self.los, self.steps, self.times, self.maps)
+            steps, times, maps = [0], [0.0], np.where(self.raster.inside, 0.0, np.nan)[None]
+        write_netcdf(os.path.join(directory, NC_NAME), self.raster, self.los, steps, times, maps)
+        self.last = (float(times[-1]), maps[-1])
 
-    def _continue(self, run_dir: str, last_step: int) -> None:
+    def _continue(self, run_dir: str, last_step: int) -> tuple:
         path = os.path.join(run_dir, NC_NAME)
         if not os.path.exists(path):
             raise InputError(f"-pfault_insar_los: the run in -pfault_restart {run_dir} has no LOS raster ({NC_NAME}); "
@@ -89,29 +89,32 @@ class InsarSeries:
             raise InputError(f"-pfault_insar_los: the LOS vector or the pixels differ from those of the run in "
                              f"-pfault_restart {run_dir}; give the -pfault_insar_los and -pfault_insar_spacing it had")
         keep = old["step"] <= last_step
-        self.steps = [int(s) for s in old["step"][keep]]
-        self.times = [float(t) for t in old["time"][keep]]
-        self.maps = list(old["los_displacement"][keep])
+        return old["step"][keep], old["time"][keep], old["los_displacement"][keep]
 
     def append(self, directory: str, step: int, t: float, u: np.ndarray) -> None:
         """``u`` (k, 3): the displacement at the pixels inside the land surface."""
-        full = np.full(self.raster.inside.shape, np.nan)
-        full[self.raster.inside] = u @ self.los
-        self.steps.append(int(step))
-        self.times.append(float(t))
-        self.maps.append(full)
-        write_netcdf(os.path.join(directory, NC_NAME), self.raster, self.los, self.steps, self.times, self.maps)
+        los = np.full(self.raster.inside.shape, np.nan)
+        los[self.raster.inside] = u @ self.los
+        t_prev, prev = self.last
+        append_netcdf(os.path.join(directory, NC_NAME), step, t, los, (los - prev) / (t - t_prev))
+        self.last = (float(t), los)
 
 
-def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: list, times: list, maps: list) -> None:
-    """``insar_los.nc`` (CF-1.8, NetCDF-4 through h5netcdf), written into ``path``.tmp and renamed."""
+def velocities(times: np.ndarray, maps: np.ndarray) -> np.ndarray:
+    """LOS velocity at each time since the previous one (NaN at the first)."""
+    rate = np.full_like(maps, np.nan)
+    if len(times) > 1:
+        rate[1:] = (maps[1:] - maps[:-1]) / (times[1:] - times[:-1])[:, None, None]
+    return rate
+
+
+def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps, times, maps: np.ndarray) -> None:
+    """``insar_los.nc`` (CF-1.8, NetCDF-4 through h5netcdf) with the given times, written into ``path``.tmp and
+    renamed; its time dimension is unlimited (``append_netcdf``)."""
     import h5netcdf
     import pfault
-    disp = np.array(maps, dtype=np.float64)
-    t = np.array(times, dtype=np.float64)
-    rate = np.full_like(disp, np.nan)
-    if len(t) > 1:
-        rate[1:] = (disp[1:] - disp[:-1]) / (t[1:] - t[:-1])[:, None, None]
+    disp = np.asarray(maps, dtype=np.float64)
+    t = np.asarray(times, dtype=np.float64)
     tmp = path + ".tmp"
     with h5netcdf.File(tmp, "w") as nc:
         nc.attrs.update({
@@ -121,24 +124,40 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: list, times:
             "comment": "LOS = e ux + n uy + u uz of the displacement relative to the initial state, positive "
                        "towards the satellite (e, n, u: unit vector from the ground to the satellite); pixels "
                        "outside the land surface hold _FillValue; x, y in site coordinates (m)"})
-        nc.dimensions = {"time": len(t), "y": len(raster.y), "x": len(raster.x)}
+        nc.dimensions = {"time": None, "y": len(raster.y), "x": len(raster.x)}
+        nc.resize_dimension("time", len(t))
         for name, values, axis in (("x", raster.x, "X"), ("y", raster.y, "Y")):
             v = nc.create_variable(name, (name,), np.float64, data=values)
             v.attrs.update({"standard_name": f"projection_{name}_coordinate", "units": "m", "axis": axis,
                             "long_name": f"{name} of the pixel centre (site coordinates)"})
-        v = nc.create_variable("time", ("time",), np.float64, data=t)
+        v = nc.create_variable("time", ("time",), np.float64)
+        v[:] = t
         v.attrs.update({"units": "s", "axis": "T", "long_name": "time from the start of the scene"})
-        v = nc.create_variable("step", ("time",), np.int64, data=np.array(steps, dtype=np.int64))
+        v = nc.create_variable("step", ("time",), np.int64)
+        v[:] = np.asarray(steps, dtype=np.int64)
         v.attrs["long_name"] = "pfault step number of the output time"
+        chunks = (1, len(raster.y), len(raster.x))              # one map per chunk: appended whole
         for name, values, units, long in (
                 ("los_displacement", disp, "m", "line-of-sight displacement relative to the initial state, "
                                                 "positive towards the satellite"),
-                ("los_velocity", rate, "m s-1", "line-of-sight velocity between the previous output time and this "
-                                                "one, positive towards the satellite")):
-            data = np.where(np.isnan(values), FILL, values)
-            v = nc.create_variable(name, ("time", "y", "x"), np.float64, data=data, fillvalue=FILL)
+                ("los_velocity", velocities(t, disp), "m s-1", "line-of-sight velocity between the previous output "
+                                                               "time and this one, positive towards the satellite")):
+            v = nc.create_variable(name, ("time", "y", "x"), np.float64, fillvalue=FILL, chunks=chunks)
+            v[:] = np.where(np.isnan(values), FILL, values)
             v.attrs.update({"units": units, "long_name": long})
     os.replace(tmp, path)
+
+
+def append_netcdf(path: str, step: int, t: float, los: np.ndarray, rate: np.ndarray) -> None:
+    """One more time in ``insar_los.nc``: its step, time, LOS map and velocity (NaN: no-data)."""
+    import h5netcdf
+    with h5netcdf.File(path, "a") as nc:
+        k = nc.dimensions["time"].size
+        nc.resize_dimension("time", k + 1)
+        nc.variables["time"][k] = float(t)
+        nc.variables["step"][k] = int(step)
+        nc.variables["los_displacement"][k] = np.where(np.isnan(los), FILL, los)
+        nc.variables["los_velocity"][k] = np.where(np.isnan(rate), FILL, rate)
 
 
 def read_netcdf(path: str) -> dict[str, np.ndarray]:

@@ -112,29 +112,26 @@ def locate_stations(path: str, serial: Any, split: Any) -> tuple[Stations, Locat
 
 
 class StationSeries:
-    """The station files of a run (rank 0): rows kept in memory, the CSV appended and the HDF5 file rewritten
-    whole (a temporary file renamed over it) after every recorded time, so that either file is complete
-    whenever the run stops."""
+    """The station files of a run (rank 0): made whole at the start (the row of time 0, or the rows of the run a
+    restart continues), then the rows of every recorded time appended in place: to the CSV, and to the HDF5
+    file's datasets, resized (the file is closed after each time, so a reader sees every row written)."""
 
     def __init__(self, stations: Stations, side: np.ndarray) -> None:
         self.stations = stations
         self.side = [SIDE_NAMES[s] for s in side]
-        self.steps: list[int] = []
-        self.times: list[float] = []
-        self.values: list[np.ndarray] = []
 
     def start(self, directory: str, restart_dir: str | None, restart_step: int | None) -> None:
         """A new run's files with the row of time 0; on a restart, those of the run it continues up to its
         checkpoint's step."""
         if restart_dir:
-            self._continue(restart_dir, int(restart_step or 0))
+            steps, times, values = self._continue(restart_dir, int(restart_step or 0))
         else:
-            self.steps, self.times, self.values = [0], [0.0], [np.zeros((len(self.side), 3))]
-        lines = [CSV_HEADER] + [self._rows(t, u) for t, u in zip(self.times, self.values)]
+            steps, times, values = np.zeros(1, np.int64), np.zeros(1), np.zeros((1, len(self.side), 3))
+        lines = [CSV_HEADER] + [self._rows(t, u) for t, u in zip(times, values)]
         replace_text(os.path.join(directory, CSV_NAME), "".join(lines))
-        self._write_h5(directory)
+        self._write_h5(directory, steps, times, values)
 
-    def _continue(self, run_dir: str, last_step: int) -> None:
+    def _continue(self, run_dir: str, last_step: int) -> tuple:
         path = os.path.join(run_dir, H5_NAME)
         if not os.path.exists(path):
             raise InputError(f"{OPTION}: the run in -pfault_restart {run_dir} has no station output ({H5_NAME}); "
@@ -148,36 +145,37 @@ class StationSeries:
             raise InputError(f"{OPTION}: the stations differ from those of the run in -pfault_restart {run_dir}; "
                              f"give the station file that run had")
         keep = steps <= last_step
-        self.steps, self.times = [int(s) for s in steps[keep]], [float(t) for t in times[keep]]
-        self.values = list(values[keep])
+        return steps[keep], times[keep], values[keep]
 
     def append(self, directory: str, step: int, t: float, u: np.ndarray) -> None:
-        self.steps.append(int(step))
-        self.times.append(float(t))
-        self.values.append(np.asarray(u, dtype=np.float64))
         with open(os.path.join(directory, CSV_NAME), "a") as fh:
             fh.write(self._rows(t, u))
-        self._write_h5(directory)
+        with open_h5(os.path.join(directory, H5_NAME), "r+") as h5:
+            k = len(h5["step"])
+            for name in ("step", "time", "vertex_fields/displacement"):
+                h5[name].resize(k + 1, axis=0)
+            h5["step"][k], h5["time"][k] = int(step), float(t)
+            h5["vertex_fields/displacement"][k] = u
 
     def _rows(self, t: float, u: np.ndarray) -> str:
-        return "".join(f"{name},{t!r},{v[0]!r},{v[1]!r},{v[2]!r},{side}\n"
-                       for name, v, side in zip(self.stations.names, u.tolist(), self.side))
+        return "".join(f"{name},{float(t)!r},{v[0]!r},{v[1]!r},{v[2]!r},{side}\n"
+                       for name, v, side in zip(self.stations.names, np.asarray(u).tolist(), self.side))
 
-    def _write_h5(self, directory: str) -> None:
+    def _write_h5(self, directory: str, steps: np.ndarray, times: np.ndarray, values: np.ndarray) -> None:
+        """The HDF5 file with the given rows, written into a temporary file and renamed."""
         path = os.path.join(directory, H5_NAME)
         tmp = path + ".tmp"
-        st = self.stations
+        st, n = self.stations, len(self.stations.names)
         with open_h5(tmp, "w") as h5:
-            width = max(len(n.encode()) for n in st.names)
-            h5.create_dataset("stations", data=np.array([n.encode() for n in st.names], dtype=f"S{width}"))
-            h5.create_dataset("side", data=np.array([s.encode() for s in self.side], dtype="S5"))
-            g = h5.create_dataset("geometry/vertices", data=st.xyz)
-            g.attrs["units"] = "m"
-            t = h5.create_dataset("time", data=np.array(self.times, dtype=np.float64).reshape(-1, 1, 1))
+            width = max(len(name.encode()) for name in st.names)
+            h5.create_dataset("stations", data=np.array([name.encode() for name in st.names], dtype=f"S{width}"))
+            h5.create_dataset("side", data=np.array([side.encode() for side in self.side], dtype="S5"))
+            h5.create_dataset("geometry/vertices", data=st.xyz).attrs["units"] = "m"
+            t = h5.create_dataset("time", data=np.asarray(times, np.float64).reshape(-1, 1, 1), maxshape=(None, 1, 1))
             t.attrs["units"] = "s"
-            h5.create_dataset("step", data=np.array(self.steps, dtype=np.int64))
-            values = np.array(self.values).reshape(-1, len(st.names), 3)
-            d = h5.create_dataset("vertex_fields/displacement", data=values)
+            h5.create_dataset("step", data=np.asarray(steps, np.int64), maxshape=(None,))
+            d = h5.create_dataset("vertex_fields/displacement", data=np.asarray(values, np.float64).reshape(-1, n, 3),
+                                  maxshape=(None, n, 3), chunks=(max(1, 4096 // n), n, 3))
             d.attrs["units"] = "m"
             d.attrs["vector_field_type"] = "vector"
             d.attrs["description"] = "displacement relative to the initial state (x, y, z)"
