@@ -31,7 +31,9 @@ from .probes import Located, PointProbe, Raster, locate_pixels
 NC_NAME = "insar_los.nc"
 PNG_NAME = "insar_los.png"
 FILL = -9999.0          # _FillValue of the pixels outside the land surface
-UNIT_TOL = 1e-3         # |los| within this of 1 is a unit vector (rounded direction cosines); it is normalised
+# |los| within this of 1 is a unit vector (direction cosines rounded to two decimals are up to ~0.009 off); it is
+# normalised
+UNIT_TOL = 0.01
 
 
 @dataclass(frozen=True)
@@ -48,12 +50,12 @@ def read_insar_settings(reader: Any) -> InsarSettings | None:
     text = ",".join(f"{v:g}" for v in los)
     if len(los) != 3:
         raise InputError(f"-pfault_insar_los {text}: give three components e,n,u of the unit vector from the ground "
-                         "to the satellite (e.g. -0.61,-0.11,0.78)")
+                         "to the satellite (e.g. -0.61,-0.11,0.785)")
     v = np.array(los, dtype=np.float64)
     norm = float(np.linalg.norm(v))
     if abs(norm - 1.0) > UNIT_TOL:
         raise InputError(f"-pfault_insar_los {text}: not a unit vector (length {norm:.4g}); give the east, north, "
-                         "up components of the unit vector from the ground to the satellite (e.g. -0.61,-0.11,0.78)")
+                         "up components of the unit vector from the ground to the satellite (e.g. -0.61,-0.11,0.785)")
     spacing = reader.get("pfault_insar_spacing")
     if spacing is not None and not spacing > 0:
         raise InputError(f"-pfault_insar_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
@@ -186,7 +188,8 @@ def insar_figure(run_dir: str) -> str | None:
     dx = d["x"][1] - d["x"][0] if len(d["x"]) > 1 else 1.0
     dy = d["y"][1] - d["y"][0] if len(d["y"]) > 1 else 1.0
     extent = (d["x"][0] - dx / 2, d["x"][-1] + dx / 2, d["y"][0] - dy / 2, d["y"][-1] + dy / 2)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), constrained_layout=True)
+    panel = float(np.clip(4.5 * (extent[1] - extent[0]) / (extent[3] - extent[2]), 2.5, 8.0))    # map's aspect
+    fig, axes = plt.subplots(1, 2, figsize=(2 * panel + 3.0, 4.8), constrained_layout=True)
     panels = ((d["los_displacement"][-1] * 1e3, "LOS displacement (mm)"),
               (d["los_velocity"][-1] * 1e3 * YEAR, "LOS velocity (mm/yr, since the previous output)"))
     for ax, (values, label) in zip(axes, panels):
