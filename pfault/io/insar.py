@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import InputError, run_on_root
 from .observers import Observer
-from .probes import Located, PointProbe, Raster, locate_pixels
+from .probes import Located, PointProbe, Raster
 
 NC_NAME = "insar_los.nc"
 PNG_NAME = "insar_los.png"
@@ -62,6 +62,22 @@ def read_insar_settings(reader: Any) -> InsarSettings | None:
     return InsarSettings(v / norm, spacing)
 
 
+def check_continuation(raster: Raster, los: np.ndarray, run_dir: str) -> dict[str, np.ndarray]:
+    """A restart continues the LOS raster of the run in ``run_dir``: it has one, of the same pixels and LOS
+    vector; returns its arrays (read_netcdf)."""
+    path = os.path.join(run_dir, NC_NAME)
+    if not os.path.exists(path):
+        raise InputError(f"-pfault_insar_los: the run in -pfault_restart {run_dir} has no LOS raster ({NC_NAME}); "
+                         "continue it without -pfault_insar_los, or run the scene from the start with it")
+    old = read_netcdf(path)
+    same = (np.array_equal(old["x"], raster.x) and np.array_equal(old["y"], raster.y)
+            and np.allclose(old["los"], los, rtol=0, atol=1e-12))
+    if not same:
+        raise InputError(f"-pfault_insar_los: the LOS vector or the pixels differ from those of the run in "
+                         f"-pfault_restart {run_dir}; give the -pfault_insar_los and -pfault_insar_spacing it had")
+    return old
+
+
 class InsarSeries:
     """The LOS raster of a run (rank 0): ``insar_los.nc`` made whole at the start (time 0, or the times of the run
     a restart continues), then one time appended in place per output time (the file is closed after each, so a
@@ -80,16 +96,7 @@ class InsarSeries:
         self.last = (float(times[-1]), maps[-1])
 
     def _continue(self, run_dir: str, last_step: int) -> tuple:
-        path = os.path.join(run_dir, NC_NAME)
-        if not os.path.exists(path):
-            raise InputError(f"-pfault_insar_los: the run in -pfault_restart {run_dir} has no LOS raster ({NC_NAME}); "
-                             "continue it without -pfault_insar_los, or run the scene from the start with it")
-        old = read_netcdf(path)
-        same = (np.array_equal(old["x"], self.raster.x) and np.array_equal(old["y"], self.raster.y)
-                and np.allclose(old["los"], self.los, rtol=0, atol=1e-12))
-        if not same:
-            raise InputError(f"-pfault_insar_los: the LOS vector or the pixels differ from those of the run in "
-                             f"-pfault_restart {run_dir}; give the -pfault_insar_los and -pfault_insar_spacing it had")
+        old = check_continuation(self.raster, self.los, run_dir)
         keep = old["step"] <= last_step
         return old["step"][keep], old["time"][keep], old["los_displacement"][keep]
 

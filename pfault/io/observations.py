@@ -12,8 +12,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import run_on_root
-from .insar import InsarObserver, InsarSettings, locate_pixels, read_insar_settings
+from .insar import InsarObserver, InsarSettings, read_insar_settings
+from .insar import check_continuation as insar_continue
+from .probes import locate_pixels
 from .stations import StationObserver, locate_stations
+from .stations import check_continuation as stations_continue
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,12 @@ class Observations:
             stations = share(locate_stations, settings.stations_file, model.serial, model.split)
         if settings.insar is not None:
             pixels = share(locate_pixels, model.serial, model.settings.ground_surface, settings.insar.spacing)
+        restart_dir = model.scene.restart_dir
+        if restart_dir:         # the files of the run it continues are there, for the same points (before a solve)
+            if stations is not None:
+                run_on_root(model.comm, stations_continue, stations[0], restart_dir)
+            if pixels is not None:
+                run_on_root(model.comm, insar_continue, pixels[0], settings.insar.los, restart_dir)
         return cls(settings, stations, pixels)
 
     def observers(self, output: Any) -> list:

@@ -111,6 +111,20 @@ def locate_stations(path: str, serial: Any, split: Any) -> tuple[Stations, Locat
     return st, located
 
 
+def check_continuation(stations: Stations, run_dir: str) -> None:
+    """A restart continues the station files of the run in ``run_dir``: it has them, for the same stations."""
+    path = os.path.join(run_dir, H5_NAME)
+    if not os.path.exists(path):
+        raise InputError(f"{OPTION}: the run in -pfault_restart {run_dir} has no station output ({H5_NAME}); "
+                         f"continue it without {OPTION}, or run the scene from the start with it")
+    with open_h5(path, "r") as h5:
+        names = [s.decode() for s in h5["stations"][()]]
+        xyz = h5["geometry/vertices"][()]
+    if names != list(stations.names) or not np.array_equal(xyz, stations.xyz):
+        raise InputError(f"{OPTION}: the stations differ from those of the run in -pfault_restart {run_dir}; "
+                         "give the station file that run had")
+
+
 class StationSeries:
     """The station files of a run (rank 0): made whole at the start (the row of time 0, or the rows of the run a
     restart continues), then the rows of every recorded time appended in place: to the CSV, and to the HDF5
@@ -132,18 +146,10 @@ class StationSeries:
         self._write_h5(directory, steps, times, values)
 
     def _continue(self, run_dir: str, last_step: int) -> tuple:
-        path = os.path.join(run_dir, H5_NAME)
-        if not os.path.exists(path):
-            raise InputError(f"{OPTION}: the run in -pfault_restart {run_dir} has no station output ({H5_NAME}); "
-                             f"continue it without {OPTION}, or run the scene from the start with it")
-        with open_h5(path, "r") as h5:
-            names = [s.decode() for s in h5["stations"][()]]
-            xyz = h5["geometry/vertices"][()]
+        check_continuation(self.stations, run_dir)
+        with open_h5(os.path.join(run_dir, H5_NAME), "r") as h5:
             steps, times = h5["step"][()], h5["time"][:, 0, 0]
             values = h5["vertex_fields/displacement"][()]
-        if names != list(self.stations.names) or not np.array_equal(xyz, self.stations.xyz):
-            raise InputError(f"{OPTION}: the stations differ from those of the run in -pfault_restart {run_dir}; "
-                             f"give the station file that run had")
         keep = steps <= last_step
         return steps[keep], times[keep], values[keep]
 

@@ -200,3 +200,25 @@ def test_restart_appends_station_rows_and_raster_times_exactly(tmp_path):
     assert list(ra["step"]) == [0, 2, 4, 6, 8, 10] and list(rb["step"]) == [0, 2, 4, 5, 6, 8, 10]
     keep = [0, 1, 2, 4, 5, 6]
     assert np.allclose(ra["los_displacement"], rb["los_displacement"][keep], rtol=0, atol=1e-12)
+
+
+def test_restart_refuses_observations_its_run_did_not_have(tmp_path):
+    """Before any solve, one line and exit 1, the run it continues left as it was."""
+    part = tmp_path / "part"
+    run_scene(OEDOMETER, part, extra=["-pfault_stations", stations_file(tmp_path, OED_STATIONS),
+                                      "-pfault_time_end", "5", "-pfault_time_steps", "5"])
+    before = {p.name: p.read_bytes() for p in part.iterdir()}
+    other = tmp_path / "other.csv"
+    other.write_text("name,x,y,z\ntop,5,5,0\n")
+    for extra, line in (
+            (["-pfault_stations", str(other)],
+             f"pfault: error: -pfault_stations: the stations differ from those of the run in -pfault_restart {part}; "
+             "give the station file that run had"),
+            (["-pfault_stations", stations_file(tmp_path, OED_STATIONS), "-pfault_insar_los", "0,0,1"],
+             f"pfault: error: -pfault_insar_los: the run in -pfault_restart {part} has no LOS raster (insar_los.nc); "
+             "continue it without -pfault_insar_los, or run the scene from the start with it")):
+        proc, _ = run_scene(OEDOMETER, part, extra=[*extra, "-pfault_restart", str(part)], check=False)
+        assert proc.returncode == 1 and line in proc.stderr.splitlines(), proc.stderr[-2000:]
+        assert "step    6" not in proc.stdout
+    assert {p.name: p.read_bytes() for p in part.iterdir()} == before
+    assert not [f for f in os.listdir(tmp_path) if ".pfault-" in f]
