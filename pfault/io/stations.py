@@ -21,6 +21,7 @@ there: no row is missing or repeated.
 from __future__ import annotations
 
 import csv
+import io
 import os
 from dataclasses import dataclass
 from typing import Any
@@ -53,9 +54,13 @@ def read_stations(path: str) -> Stations:
         raise InputError(f"{where}: no such file; give a CSV file whose first line names the columns "
                          "name,x,y,z (and optionally side), then one station per line")
     try:
-        with open(path, newline="") as fh:
-            rows = [(i + 1, r) for i, r in enumerate(csv.reader(fh))
-                    if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
+        with open(path, newline="", encoding="utf-8-sig") as fh:     # a spreadsheet's byte-order mark is not text
+            lines = fh.read().splitlines()
+        first = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
+        # a spreadsheet set for decimal commas separates columns with semicolons; tabs are allowed too
+        delimiter = next((d for d in (";", "\t") if d in first and "," not in first), ",")
+        rows = [(i + 1, r) for i, r in enumerate(csv.reader(lines, delimiter=delimiter))
+                if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
     except (UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"{where}: not a CSV text file ({exc}); {COLUMNS_FIX}") from None
     if not rows:
@@ -164,8 +169,12 @@ class StationSeries:
             h5["vertex_fields/displacement"][k] = u
 
     def _rows(self, t: float, u: np.ndarray) -> str:
-        return "".join(f"{name},{float(t)!r},{v[0]!r},{v[1]!r},{v[2]!r},{side}\n"
-                       for name, v, side in zip(self.stations.names, np.asarray(u).tolist(), self.side))
+        """CSV rows of one time (numbers as Python writes them: they read back to the same float)."""
+        text = io.StringIO()
+        csv.writer(text, lineterminator="\n").writerows(
+            [name, repr(float(t)), *map(repr, v), side]
+            for name, v, side in zip(self.stations.names, np.asarray(u).tolist(), self.side))
+        return text.getvalue()
 
     def _write_h5(self, directory: str, steps: np.ndarray, times: np.ndarray, values: np.ndarray) -> None:
         """The HDF5 file with the given rows, written into a temporary file and renamed."""

@@ -222,3 +222,16 @@ def test_restart_refuses_observations_its_run_did_not_have(tmp_path):
         assert "step    6" not in proc.stdout
     assert {p.name: p.read_bytes() for p in part.iterdir()} == before
     assert not [f for f in os.listdir(tmp_path) if ".pfault-" in f]
+
+
+def test_a_station_file_saved_by_a_spreadsheet(tmp_path):
+    """A byte-order mark, semicolons between columns, capitalised column names, a name with a comma, extra columns:
+    read as meant, and the name quoted in the output CSV."""
+    path = tmp_path / "stations.csv"
+    path.write_bytes('\ufeffName;X;Y;Z;Comment\n"top, north corner";10;10;0;benchmark 12\n'.encode("utf-8"))
+    out = tmp_path / "out"
+    run_scene(OEDOMETER, out, extra=["-pfault_stations", str(path), "-pfault_time_steps", "2"])
+    rows = read_station_csv(out)
+    assert [r["name"] for r in rows] == ["top, north corner"] * 3
+    assert float(rows[-1]["uz_m"]) == pytest.approx(-EXACT, rel=1e-8)
+    assert '"top, north corner",10.0,' in (out / "station_displacement.csv").read_text()
