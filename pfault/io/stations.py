@@ -57,7 +57,8 @@ def read_stations(path: str) -> Stations:
         with open(path, newline="", encoding="utf-8-sig") as fh:     # a spreadsheet's byte-order mark is not text
             lines = fh.read().splitlines()
         first = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
-        # a spreadsheet set for decimal commas separates columns with semicolons; tabs are allowed too
+        # a spreadsheet set for decimal commas separates columns with semicolons (and its numbers may have
+        # decimal commas there); tabs are allowed too
         delimiter = next((d for d in (";", "\t") if d in first and "," not in first), ",")
         rows = [(i + 1, r) for i, r in enumerate(csv.reader(lines, delimiter=delimiter))
                 if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
@@ -80,7 +81,7 @@ def read_stations(path: str) -> Stations:
         if name in names:
             raise InputError(f"{where} line {line}: station '{name}' appears twice; give each station its own name")
         try:
-            x = [float(r[col[c]]) for c in "xyz"]
+            x = [float(r[col[c]].replace(",", ".") if delimiter == ";" else r[col[c]]) for c in "xyz"]
         except ValueError:
             raise InputError(f"{where} line {line}: station '{name}': x, y, z must be numbers (m), got "
                              f"{', '.join(r[col[c]].strip() or '(empty)' for c in 'xyz')}") from None

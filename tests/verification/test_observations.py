@@ -225,13 +225,15 @@ def test_restart_refuses_observations_its_run_did_not_have(tmp_path):
 
 
 def test_a_station_file_saved_by_a_spreadsheet(tmp_path):
-    """A byte-order mark, semicolons between columns, capitalised column names, a name with a comma, extra columns:
-    read as meant, and the name quoted in the output CSV."""
+    """A byte-order mark, semicolons between columns and a decimal comma, capitalised column names, a name with a
+    comma, extra columns: read as meant, and the name quoted in the output CSV."""
     path = tmp_path / "stations.csv"
-    path.write_bytes('\ufeffName;X;Y;Z;Comment\n"top, north corner";10;10;0;benchmark 12\n'.encode("utf-8"))
+    path.write_bytes('\ufeffName;X;Y;Z;Comment\n"top, north corner";10;9,5;0;benchmark 12\n'.encode("utf-8"))
     out = tmp_path / "out"
     run_scene(OEDOMETER, out, extra=["-pfault_stations", str(path), "-pfault_time_steps", "2"])
     rows = read_station_csv(out)
     assert [r["name"] for r in rows] == ["top, north corner"] * 3
     assert float(rows[-1]["uz_m"]) == pytest.approx(-EXACT, rel=1e-8)
     assert '"top, north corner",10.0,' in (out / "station_displacement.csv").read_text()
+    with h5py.File(out / "station_displacement.h5", "r") as h5:
+        assert np.array_equal(h5["geometry/vertices"][()], [[10, 9.5, 0]])
