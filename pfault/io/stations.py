@@ -3,7 +3,8 @@ FILE``.
 
 The station file is CSV with a header line naming its columns: ``name``, ``x``, ``y``, ``z`` (site coordinates,
 m) and optionally ``side`` (``plus`` or ``minus``: the side a station on a fault takes, default minus; see
-pfault.io.probes). Lines starting with ``#`` are comments.
+pfault.io.probes); other columns are ignored. Lines starting with ``#`` are comments. Columns are separated by
+commas, or as spreadsheets save them, by tabs or by semicolons (then decimal commas are read too).
 
 A run writes, at time 0 and after every converged step, the displacement relative to the initial state at each
 station (P1 interpolation in its cell, pfault.io.probes):
