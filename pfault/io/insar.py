@@ -141,7 +141,8 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps, times, maps:
                             "long_name": f"{name} of the pixel centre (site coordinates)"})
         v = nc.create_variable("time", ("time",), np.float64)
         v[:] = t
-        v.attrs.update({"units": "s", "axis": "T", "long_name": "time from the start of the scene"})
+        # seconds, not "seconds since" a date: a scene has no calendar date, and CF's time axis needs one
+        v.attrs.update({"units": "s", "long_name": "time from the start of the scene"})
         v = nc.create_variable("step", ("time",), np.int64)
         v[:] = np.asarray(steps, dtype=np.int64)
         v.attrs["long_name"] = "pfault step number of the output time"
