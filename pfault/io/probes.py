@@ -128,8 +128,8 @@ def ground_faces(serial: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
 
 def locate_pixels(serial: Any, ground: str, spacing: float | None) -> tuple[Raster, Located]:
     """Rank 0: the raster over the land surface and, for each pixel inside it (in row-major order of
-    ``inside``), the tetrahedron under the surface triangle below its centre and the P1 weights there."""
-    import matplotlib.tri as mtri
+    ``inside``), the tetrahedron under the surface triangle below its centre and the P1 weights there. A centre
+    on an edge or a vertex shared by several triangles takes the one of the smallest cell id, as a station does."""
     cell, lface = ground_faces(serial, ground)
     if not len(cell):
         raise InputError(f"-pfault_insar_los: the mesh has no land surface (-pfault_ground_surface {ground}, nor "
@@ -141,32 +141,48 @@ def locate_pixels(serial: Any, ground: str, spacing: float | None) -> tuple[Rast
     area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
                   - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
     flat = np.abs(area) > 1e-9 * np.abs(area).max()                 # vertical triangles cover no pixel
-    cell, local, tri = cell[flat], local[flat], tri[flat]
+    cell, local, p = cell[flat], local[flat], p[flat]
     if spacing is None:
-        edges = np.linalg.norm(xy[tri] - xy[np.roll(tri, 1, axis=1)], axis=2)
-        spacing = float(edges.mean())
-    verts, inv = np.unique(tri, return_inverse=True)
-    inv = inv.reshape(-1, 3)
-    lo, hi = xy[verts].min(axis=0), xy[verts].max(axis=0)
+        spacing = float(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).mean())
+    lo, hi = p.min(axis=(0, 1)), p.max(axis=(0, 1))
     first = np.floor(lo / spacing + 1e-9) * spacing
     count = np.maximum(np.ceil((hi - first) / spacing - 1e-9).astype(np.int64), 1)
     x = first[0] + spacing * (np.arange(count[0]) + 0.5)
     y = first[1] + spacing * (np.arange(count[1]) + 0.5)
-    px, py = np.meshgrid(x, y)
-    tr = mtri.Triangulation(xy[verts, 0], xy[verts, 1], inv)
-    found = tr.get_trifinder()(px.ravel(), py.ravel())
-    inside = found >= 0
-    k = found[inside]
-    q = np.column_stack([px.ravel()[inside], py.ravel()[inside]])
-    a, b, c = xy[tri[k, 0]], xy[tri[k, 1]], xy[tri[k, 2]]
+    pixel, k, lam = _pixels_in_triangles(p, first, spacing, count)
+    order = np.lexsort((k, cell[k], pixel))                        # per pixel: the smallest cell id first
+    pixel, k, lam = pixel[order], k[order], lam[order]
+    one = np.r_[True, pixel[1:] != pixel[:-1]]
+    pixel, k, lam = pixel[one], k[one], lam[one]
+    inside = np.zeros(count[1] * count[0], bool)
+    inside[pixel] = True
+    weights = np.zeros((len(k), 4))
+    weights[np.arange(len(k))[:, None], local[k]] = lam
+    located = Located(cell[k].astype(np.int64), weights, np.zeros(len(k), np.int64))
+    return Raster(x, y, inside.reshape(count[1], count[0])), located
+
+
+def _pixels_in_triangles(p: np.ndarray, first: np.ndarray, spacing: float,
+                         count: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every (pixel, triangle) pair whose pixel centre is in the triangle (``p`` (m, 3, 2) its corners; pixel
+    centres first + (i + 1/2) spacing, ``count`` (nx, ny) of them): the pixel's row-major index, the triangle and
+    its barycentric coordinates (n, 3) there. The candidates are the pixels of each triangle's bounding box."""
+    lo = np.ceil((p.min(axis=1) - first) / spacing - 0.5 - 1e-9).astype(np.int64)
+    hi = np.floor((p.max(axis=1) - first) / spacing - 0.5 + 1e-9).astype(np.int64)
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, count - 1)
+    size = np.maximum(hi - lo + 1, 0)                               # (m, 2) pixels along x and y
+    n = size[:, 0] * size[:, 1]
+    k = np.repeat(np.arange(len(p)), n)
+    r = np.arange(len(k)) - np.repeat(np.cumsum(n) - n, n)
+    ix, iy = lo[k, 0] + r % size[k, 0], lo[k, 1] + r // size[k, 0]
+    q = first + spacing * (np.column_stack([ix, iy]) + 0.5)
+    a, b, c = p[k, 0], p[k, 1], p[k, 2]
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
     l1 = ((q[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (q[:, 1] - a[:, 1])) / det
     l2 = ((b[:, 0] - a[:, 0]) * (q[:, 1] - a[:, 1]) - (q[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])) / det
-    weights = np.zeros((len(k), 4))
-    rows = np.arange(len(k))[:, None]
-    weights[rows, local[k]] = np.column_stack([1.0 - l1 - l2, l1, l2])
-    located = Located(cell[k].astype(np.int64), weights, np.zeros(len(k), np.int64))
-    return Raster(x, y, inside.reshape(px.shape)), located
+    lam = np.column_stack([1.0 - l1 - l2, l1, l2])
+    keep = np.all(lam >= -INSIDE_TOL, axis=1)
+    return (iy * count[0] + ix)[keep], k[keep], lam[keep]
 
 
 class PointProbe:

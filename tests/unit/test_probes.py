@@ -69,3 +69,22 @@ def test_a_mesh_without_a_land_surface_has_no_raster():
     mesh.points[:, 2] += mesh.points[:, 0] * 1e-3      # no face on the plane z = max z either
     with pytest.raises(InputError, match="no land surface"):
         locate_pixels(mesh, "top", 1.0)
+
+
+def test_a_pixel_on_shared_edges_takes_the_triangle_of_smallest_cell_id():
+    """Pixel centres at the centres of the box's top squares lie on their diagonals: by brute force over the land
+    surface's triangles, each takes the smallest cell id among those that hold it."""
+    from pfault.io.probes import ground_faces
+    from pfault.mesh.serial import TET_FACES
+    mesh = box_mesh((4.0, 4.0, 1.0), (2, 2, 1))
+    raster, loc = locate_pixels(mesh, "top", 2.0)
+    assert raster.inside.all() and len(loc.cell) == 4
+    cell, lface = ground_faces(mesh, "top")
+    corners = mesh.points[mesh.tets[cell[:, None], TET_FACES[lface]]][:, :, :2]
+    px, py = np.meshgrid(raster.x, raster.y)
+    for centre, got in zip(np.column_stack([px.ravel(), py.ravel()]), loc.cell):
+        a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+        m = np.stack([b - a, c - a], axis=2)
+        lam = np.linalg.solve(m, (centre - a)[:, :, None])[:, :, 0]
+        holds = (lam >= -1e-12).all(axis=1) & (lam.sum(axis=1) <= 1 + 1e-12)
+        assert holds.sum() >= 2 and got == cell[holds].min()
