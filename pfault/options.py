@@ -171,6 +171,15 @@ SPECS = [
        "checkpoint.h5), up to -pfault_time_end; the checkpoint's time must be a point of the time grid "
        "-pfault_time_end and -pfault_time_steps give; writes into that directory unless -pfault_output_dir "
        "is given"),
+    # output: observations
+    _s("pfault_stations", "string", "", "", "CSV file of stations, header name,x,y,z[,side] (site coordinates, m; "
+       "side plus|minus: the side a station on a fault takes, default minus): their displacement at time 0 and after "
+       "every step in station_displacement.csv and .h5"),
+    _s("pfault_insar_los", "list", "", "", "unit vector e,n,u from the ground to the satellite: the land surface's "
+       "line-of-sight displacement (positive towards the satellite) and its rate at every output time on a raster, "
+       "insar_los.nc (CF NetCDF) and insar_los.png"),
+    _s("pfault_insar_spacing", "quantity", None, "m", "pixel size of the LOS raster (default: the mean edge length "
+       "of the land surface's triangles)"),
     _s("pfault_figures", "bool", True, "", "write PNG figures next to the output at the end of the run: fault "
        "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map"),
 ]

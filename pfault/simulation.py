@@ -13,6 +13,7 @@ from petsc4py import PETSc
 from . import run as loop
 from .effects import EffectCosts
 from .errors import InputError
+from .io.observations import Observations, read_observation_settings
 from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLine, RunOutput, SummaryObserver,
                            format_time, progress_line)
 from .model import Model, build_model
@@ -38,6 +39,7 @@ class Simulation:
         self.solver: StepSolver | None = None
         self.output: RunOutput | None = None
         self.restart_step: int | None = None
+        self.observations: Observations | None = None
 
     @property
     def settings(self) -> Any:
@@ -45,7 +47,9 @@ class Simulation:
 
     def setup(self) -> None:
         self.costs = EffectCosts(self.comm)
+        observed = read_observation_settings(self.reader)      # before build_model checks the -pfault_ options
         self.model = m = build_model(self.comm, self.reader, self.options_file)
+        self.observations = Observations.locate(m, observed)
         self.wall.update(m.wall)
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Setup")
@@ -76,10 +80,11 @@ class Simulation:
         return self.summary
 
     def observers(self, output: RunOutput, records: list) -> list[Observer]:
-        """The observers of every step, in the order they see it: the progress line, the fields, the checkpoint
-        and the summary (``records``: the run's step records, which the last two write)."""
-        return [ProgressLine(), FieldOutput(output), CheckpointObserver(output, self.state, records),
-                SummaryObserver(output, self._summary, records)]
+        """The observers of every step, in the order they see it: the progress line, the fields, the stations and
+        the LOS raster (pfault.io.observations), the checkpoint and the summary (``records``: the run's step
+        records, which the last two write)."""
+        return [ProgressLine(), FieldOutput(output), *self.observations.observers(output),
+                CheckpointObserver(output, self.state, records), SummaryObserver(output, self._summary, records)]
 
     def _open_output(self) -> None:
         """After the first solve (every solver option has been read by then): reject unused options, then open

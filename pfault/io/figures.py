@@ -17,7 +17,9 @@ writes them into any RUN_DIR (an interrupted run's too):
 - ``histories.png``: maximum subsidence, opening, slip (and drawdown) against time from summary.json, with
   the Newton iterations and factorisations per step;
 - ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.io.hazard): largest
-  horizontal principal strain and angular distortion, with the fault traces and the maxima marked.
+  horizontal principal strain and angular distortion, with the fault traces and the maxima marked;
+- ``insar_los.png`` (``-pfault_insar_los``): the LOS raster's displacement and velocity at its last time
+  (pfault.io.insar).
 
 Each PNG is written whole into ``NAME.png.tmp`` and renamed over the old one.
 
@@ -573,6 +575,10 @@ def make_figures(run_dir: str, step: int = -1) -> list[str]:
     paths.append(histories_figure(run_dir))
     if has_surface(run_dir):
         paths.append(hazard_figure(run_dir, step=step))
+    from .insar import insar_figure
+    insar = insar_figure(run_dir)       # the LOS raster's last time (-pfault_insar_los)
+    if insar is not None:
+        paths.append(insar)
     return paths
 
 

@@ -86,6 +86,12 @@ def scene_file(text, *extra):
                                     str(out), *extra]
 
 
+def stations(text):
+    """The oedometer with the station file ``text``."""
+    return lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", str(out), "-pfault_stations",
+                                    write(tmp / "stations.csv", text)]
+
+
 def inject(kind, rank, step):
     """A fault on one rank (rank 0 when there is only one), in time step ``step``."""
     return lambda tmp, out, ranks: ["tests/scripts/inject_fault.py", kind, str(min(rank, ranks - 1)), str(step),
@@ -181,6 +187,20 @@ CASES = [
     Case("unused_solver_option", scene("-ksp_rtoll", "1e-3"), 1, "unused option -ksp_rtoll", "kept"),
     Case("box_beyond_petsc_indices", scene("-pfault_box_cells", "3000,3000,3000"), 1,
          "-pfault_box_cells 3000,3000,3000: 8.11e+10 displacement unknowns exceed the 32-bit indices"),
+    # observations (pfault.io.stations, pfault.io.insar): exit 1, found before the first solve
+    Case("station_outside_the_mesh", stations("name,x,y,z\ntop,5,5,0\nfar,50,5,-10\n"), 1,
+         "1 station(s) outside the mesh: 'far' at (50, 5, -10); the mesh spans x 0..10, y 0..10, z -100..0 m (site "
+         "coordinates): move them inside or remove them"),
+    Case("station_file_without_columns", stations("name,x,y\ntop,5,5\n"), 1,
+         "no column z in its header line 'name,x,y'; its first line names the columns: name,x,y,z (and optionally "
+         "side)"),
+    Case("station_file_missing", scene("-pfault_stations", "no_such_stations.csv"), 1,
+         "-pfault_stations no_such_stations.csv: no such file; give a CSV file whose first line names the columns"),
+    Case("los_not_a_unit_vector", scene("-pfault_insar_los", "1,0,1"), 1,
+         "-pfault_insar_los 1,0,1: not a unit vector (length 1.414); give the east, north, up components of the unit "
+         "vector from the ground to the satellite"),
+    Case("insar_spacing_not_positive", scene("-pfault_insar_los", "0,0,1", "-pfault_insar_spacing", "0"), 1,
+         "-pfault_insar_spacing 0: the pixel size must be positive (m)"),
     # boundary conditions that do not hold the body: exit 1, found from the constraints before any solve
     Case("floating_body", scene(*FREE_SIDES, "-pfault_bc_bottom_type", "free"), 1,
          "leave the body free to translate along x, y and z and to rotate about x, y and z (nothing holds it); "
