@@ -47,9 +47,11 @@ class Observations:
             return (found[0] if mpi.rank == 0 else None), located
         stations = pixels = None
         if settings.stations_file:
-            stations = share(locate_stations, settings.stations_file, model.serial, model.split)
+            stations = share(locate_stations, settings.stations_file, model.serial, model.split,
+                             model.scene.mesh_origin)
         if settings.insar is not None:
-            pixels = share(locate_pixels, model.serial, model.settings.ground_surface, settings.insar.spacing)
+            pixels = share(locate_pixels, model.serial, model.settings.ground_surface, settings.insar.spacing,
+                           model.scene.mesh_origin)
         restart_dir = model.scene.restart_dir
         if restart_dir:         # the files of the run it continues are there, for the same points (before a solve)
             if stations is not None:

@@ -15,6 +15,8 @@ from the mesh's.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,14 +32,13 @@ INSIDE_TOL = 1e-9
 SIDE_NAMES = ("", "minus", "plus")      # side codes: 0 not on a fault, 1 minus, 2 plus
 
 
-def mesh_to_site(xyz: np.ndarray, inverse: bool = False) -> np.ndarray:
+def mesh_to_site(xyz: np.ndarray, origin: Sequence[float] = (0.0, 0.0, 0.0), inverse: bool = False) -> np.ndarray:
     """Site coordinates of points in mesh coordinates ((n, 3) or (n, 2) x, y); ``inverse``: mesh coordinates of
-    points in site coordinates. Site = mesh + origin, with the origin zero until -pfault_mesh_origin is wired
-    here: every coordinate a station file gives and every coordinate pfault writes for stations and rasters
-    goes through this function."""
+    points in site coordinates. Site = mesh + origin (-pfault_mesh_origin): every coordinate a station file gives
+    and every coordinate pfault writes for stations and rasters goes through this function."""
     xyz = np.asarray(xyz, dtype=np.float64)
-    origin = np.zeros(3)[:xyz.shape[-1]]
-    return xyz - origin if inverse else xyz + origin
+    shift = np.asarray(origin, dtype=np.float64)[:xyz.shape[-1]]
+    return xyz - shift if inverse else xyz + shift
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,8 @@ def ground_faces(serial: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
     return cell, lface
 
 
-def locate_pixels(serial: Any, ground: str, spacing: float | None) -> tuple[Raster, Located]:
+def locate_pixels(serial: Any, ground: str, spacing: float | None,
+                  origin: Sequence[float] = (0.0, 0.0, 0.0)) -> tuple[Raster, Located]:
     """Rank 0: the raster over the land surface and, for each pixel inside it (in row-major order of
     ``inside``), the tetrahedron under the surface triangle below its centre and the P1 weights there. A centre
     on an edge or a vertex shared by several triangles takes the one of the smallest cell id, as a station does."""
@@ -136,7 +138,7 @@ def locate_pixels(serial: Any, ground: str, spacing: float | None) -> tuple[Rast
                          "faces on its top plane) to map")
     local = TET_FACES[lface]                                        # (m, 3) local vertices of each triangle
     tri = serial.tets[cell[:, None], local]
-    xy = mesh_to_site(serial.points[:, :2])
+    xy = mesh_to_site(serial.points[:, :2], origin)
     p = xy[tri]
     area = 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
                   - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))

@@ -100,16 +100,17 @@ def read_stations(path: str) -> Stations:
     return Stations(names, np.array(xyz, dtype=np.float64), np.array(plus, dtype=bool))
 
 
-def locate_stations(path: str, serial: Any, split: Any) -> tuple[Stations, Located]:
+def locate_stations(path: str, serial: Any, split: Any,
+                    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[Stations, Located]:
     """Rank 0: read the station file and locate its stations in the serial mesh; InputError for stations outside
     the mesh (how many, which, and the mesh's extent)."""
     st = read_stations(path)
-    located = locate_points(serial.points, serial.tets, mesh_to_site(st.xyz, inverse=True),
+    located = locate_points(serial.points, serial.tets, mesh_to_site(st.xyz, origin, inverse=True),
                             None if split is None else split.vert_sides, None if split is None else split.cell_side,
                             st.plus)
     out = np.flatnonzero(located.cell < 0)
     if len(out):
-        lo, hi = mesh_to_site(serial.points.min(axis=0)), mesh_to_site(serial.points.max(axis=0))
+        lo, hi = mesh_to_site(serial.points.min(axis=0), origin), mesh_to_site(serial.points.max(axis=0), origin)
         which = ", ".join(f"'{st.names[i]}' at ({', '.join(f'{v:g}' for v in st.xyz[i])})" for i in out[:3])
         more = f" and {len(out) - 3} more" if len(out) > 3 else ""
         raise InputError(f"{OPTION} {path}: {len(out)} station(s) outside the mesh: {which}{more}; the mesh spans "

@@ -10,9 +10,26 @@ from pfault.mesh.box import box_mesh, parse_planes
 from pfault.mesh.fault import split_faults
 
 
-def test_mesh_to_site_is_the_identity_until_an_origin_is_wired():
+def test_mesh_to_site_adds_the_origin_and_its_inverse_removes_it():
     x = np.array([[1.0, 2.0, -3.0]])
     assert np.array_equal(mesh_to_site(x), x) and np.array_equal(mesh_to_site(x, inverse=True), x)
+    origin = (500000.0, 3500000.0, 5.0)
+    assert np.array_equal(mesh_to_site(x, origin), [[500001.0, 3500002.0, 2.0]])
+    assert np.array_equal(mesh_to_site(x[:, :2], origin), [[500001.0, 3500002.0]])
+    assert np.array_equal(mesh_to_site(mesh_to_site(x, origin), origin, inverse=True), x)
+
+
+def test_stations_and_pixels_in_site_coordinates_follow_the_origin():
+    mesh = box_mesh((3.0, 2.0, 1.0), (3, 2, 2))
+    origin = (1000.0, 2000.0, 10.0)
+    xyz = np.array([[0.7, 1.3, -0.4]])
+    here = locate_points(mesh.points, mesh.tets, xyz)
+    there = locate_points(mesh.points, mesh.tets, mesh_to_site(mesh_to_site(xyz, origin), origin, inverse=True))
+    assert here.cell[0] == there.cell[0] and np.allclose(here.weights, there.weights, atol=1e-12)
+    raster, _ = locate_pixels(mesh, "top", 0.5)
+    moved, _ = locate_pixels(mesh, "top", 0.5, origin)
+    assert np.allclose(np.asarray(moved.x) - np.asarray(raster.x), origin[0])
+    assert np.allclose(np.asarray(moved.y) - np.asarray(raster.y), origin[1])
 
 
 def test_points_get_their_cell_and_p1_weights():
