@@ -30,7 +30,6 @@ ALLOWED = {
     "pfault/mesh/fault.py::split_faults": "",
     "pfault/mesh/geometry.py::wuxi_mesh": "",
     "pfault/mesh/geometry.py::queretaro_mesh": "",
-    "pfault/solver/flow.py::GroundwaterFlow": "",
 }
 
 
