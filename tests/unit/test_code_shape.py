@@ -26,10 +26,6 @@ ALLOWED = {
     "pfault/faults/interface.py::FaultInterface": "issue 31, Faces that hold",
     # split in the commits that follow this one
     "pfault/io/figures.py::subsidence_figure": "",
-    "pfault/mesh/box.py::box_mesh": "",
-    "pfault/mesh/fault.py::split_faults": "",
-    "pfault/mesh/geometry.py::wuxi_mesh": "",
-    "pfault/mesh/geometry.py::queretaro_mesh": "",
 }
 
 
