@@ -24,8 +24,6 @@ ALLOWED = {
     # issue 31 ("Faces that hold") rewrites the fault faces and the fault interface: sized there, not here
     "pfault/faults/faces.py::FaultFaces": "issue 31, Faces that hold",
     "pfault/faults/interface.py::FaultInterface": "issue 31, Faces that hold",
-    # split in the commits that follow this one
-    "pfault/io/figures.py::subsidence_figure": "",
 }
 
 
