@@ -608,7 +608,7 @@ def write_run_figures(run_dir: str) -> list[str]:
         return []
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     """``python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]``: the figures of each run directory; exit
     code 1 when one is not a pfault run directory."""
     import argparse

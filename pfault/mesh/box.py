@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -26,7 +26,7 @@ def _kuhn_corners():
     return np.array(tets)
 
 
-def layer_z_nodes(lz, nz, interfaces):
+def layer_z_nodes(lz: float, nz: int, interfaces: Sequence[float]) -> np.ndarray:
     """z-coordinates of node planes from -lz to 0 with planes at every interface depth."""
     depths = [0.0] + sorted(interfaces) + [lz]
     if any(b <= a for a, b in zip(depths, depths[1:])):
@@ -40,7 +40,7 @@ def layer_z_nodes(lz, nz, interfaces):
     return np.concatenate(zs)[::-1]  # increasing
 
 
-def parse_planes(specs):
+def parse_planes(specs: Iterable[str]) -> list[tuple[str, int, float, list[float]]]:
     """'name:axis:value[:lo1:hi1:lo2:hi2]' -> (name, axis, value, bounds of the two other coordinates)."""
     planes = []
     for spec in specs:

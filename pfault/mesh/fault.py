@@ -36,7 +36,7 @@ class FaultSplit:
     tip_vertices: np.ndarray  # sorted ids of fault vertices that are not split
 
     @property
-    def split_vertices(self):
+    def split_vertices(self) -> np.ndarray:
         return np.nonzero(self.vert_sides == 2)[0]
 
 

@@ -21,16 +21,20 @@ from __future__ import annotations
 import contextlib
 import math
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InputError
 from .gmsh_io import from_gmsh_model
+from .serial import SerialMesh
 
 # ------------------------------------------------------------------------------------------------------
 # Wuxi (Su-Xi-Chang, Jiangsu, China): earth fissure above a buried bedrock ridge
 # ------------------------------------------------------------------------------------------------------
 WUXI_SIZE = (2000.0, 5000.0, 250.0)           # Lx, Ly, depth (m)
-WUXI_DEFAULTS = dict(
+WUXI_DEFAULTS: dict[str, Any] = dict(
     ridge_x=1000.0,                  # x of the ridge crest line and of the fissure plane (m)
     crest_depth=5.0,                 # depth of the bedrock crest below the land surface (m)
     bedrock_depth=100.0,             # depth of the bedrock top away from the ridge (m)
@@ -48,7 +52,7 @@ _WUXI_H_MAX = 95.0
 # ------------------------------------------------------------------------------------------------------
 QUERETARO_SIZE = (30000.0, 30000.0, 50.0)     # Lx, Ly, depth (m)
 QUERETARO_WELLS = ((12000.0, 12000.0), (12000.0, 15000.0), (12000.0, 18000.0))
-QUERETARO_DEFAULTS = dict(
+QUERETARO_DEFAULTS: dict[str, Any] = dict(
     fault_x=10000.0,                 # x of the vertical fault plane; rock for x < fault_x (m)
     clay_thickness=20.0,             # clay aquitard 0..20 m over the sand aquifer 20..50 m (m)
     wells=QUERETARO_WELLS,           # (x, y) of the pumping wells (m); refinement only
@@ -197,9 +201,10 @@ def _size_field(gmsh, expr):
 # ------------------------------------------------------------------------------------------------------
 # Wuxi
 # ------------------------------------------------------------------------------------------------------
-def wuxi_bedrock_top(x, ridge_x=WUXI_DEFAULTS["ridge_x"], crest_depth=WUXI_DEFAULTS["crest_depth"],
-                     bedrock_depth=WUXI_DEFAULTS["bedrock_depth"],
-                     ridge_half_width=WUXI_DEFAULTS["ridge_half_width"]):
+def wuxi_bedrock_top(x: ArrayLike, ridge_x: float = WUXI_DEFAULTS["ridge_x"],
+                     crest_depth: float = WUXI_DEFAULTS["crest_depth"],
+                     bedrock_depth: float = WUXI_DEFAULTS["bedrock_depth"],
+                     ridge_half_width: float = WUXI_DEFAULTS["ridge_half_width"]) -> np.ndarray:
     """Elevation z (m, negative) of the bedrock top at x: the piecewise-linear ridge profile."""
     x = np.asarray(x, dtype=float)
     slope = (bedrock_depth - crest_depth) / ridge_half_width
@@ -241,7 +246,7 @@ def _wuxi_params(params):
     return p
 
 
-def wuxi_mesh(size_factor=1.0, **params):
+def wuxi_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     """Earth fissure above a buried bedrock ridge (Wuxi, Su-Xi-Chang area, China).
 
     Domain 0 <= x <= 2000 m, 0 <= y <= 5000 m, -250 <= z <= 0. The geometry does not vary along y.
@@ -393,7 +398,7 @@ def _queretaro_params(params):
     return p
 
 
-def queretaro_mesh(size_factor=1.0, **params):
+def queretaro_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     """Pre-existing fault bounding a pumped aquifer (Queretaro valley, Mexico).
 
     Domain 0 <= x, y <= 30 km, -50 <= z <= 0. For x < ``fault_x`` (10 km) the whole depth is ``rock``

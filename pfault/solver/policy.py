@@ -110,7 +110,7 @@ class FactorReuse:
         now = time.perf_counter()
         if its == 0:
             fresh = self._factoring is not None
-            if fresh:
+            if self._factoring is not None:
                 self.t_factor = now - self._factoring
                 self.null_pivots = mumps_null_pivots(ksp.getPC())
             self._factoring = None
