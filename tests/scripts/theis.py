@@ -137,12 +137,9 @@ def interface(comm):
                            fixed_head=(mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0, substeps=fs.substeps)
     out = {"wells": wells_xy, "load_sum": [], "load_diff_vs_serial": [], "storage": fs.storage.tolist(),
            "conductivity": fs.conductivity.tolist(), "rate_at_1day": fs.wells[0].rate(86400.0)}
-    for well, load in zip(fs.wells, flow.well_loads):
+    for well, load in zip(fs.wells, flow.wells.loads):
         out["load_sum"].append(load.sum())
-        lv = flow.dm.getLocalVec()
-        flow.dm.globalToLocal(load, lv)
-        gathered = distributed.gather_vertex_values(mesh, lv.getArray().copy()[:, None])
-        flow.dm.restoreLocalVec(lv)
+        gathered = distributed.gather_vertex_values(mesh, flow.grid.to_local(load)[:, None])
         if comm.rank == 0:
             grad, vol = fl.tet_geometry(serial.points[serial.tets])
             length, mid = fl.vertical_line_in_tets(grad, vol, serial.points[serial.tets[:, 0]], well.x, well.y,
