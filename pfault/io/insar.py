@@ -18,8 +18,8 @@ displacement and velocity. A restart keeps the times of the run it continues up 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
