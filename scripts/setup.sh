@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs what pfault needs on Debian 12, once: Debian's PETSc stack, OpenBLAS, and a venv
-# (system site packages) holding pfault (editable), gmsh, meshio, pytest and matplotlib (figures).
+# (system site packages) holding pfault (editable), gmsh, meshio, scipy (spatial fields), pytest and matplotlib
+# (figures).
 # Seconds when ready.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,10 +21,11 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv (with system site packages: Debian's petsc4py, mpi4py, numpy, h5py)"
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
-if ! .venv/bin/python -c "import gmsh, meshio, pytest, matplotlib" >/dev/null 2>&1; then
-  echo "setup: installing gmsh, meshio, pytest, matplotlib into .venv"
-  # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command
-  .venv/bin/pip install -q --disable-pip-version-check gmsh meshio pytest matplotlib "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
+if ! .venv/bin/python -c "import gmsh, meshio, scipy, pytest, matplotlib" >/dev/null 2>&1; then
+  echo "setup: installing gmsh, meshio, scipy, pytest, matplotlib into .venv"
+  # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command; scipy 1.10-1.11 is the
+  # series whose wheels accept Debian 12's numpy 1.24 (newer ones pull numpy 2)
+  .venv/bin/pip install -q --disable-pip-version-check gmsh meshio "scipy>=1.10,<1.12" pytest matplotlib "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
 fi
 if ! .venv/bin/python -I -c "import pfault, sys; sys.exit(0 if pfault.__file__.startswith('$PWD') else 1)" >/dev/null 2>&1; then
   .venv/bin/pip install -q --disable-pip-version-check --no-build-isolation --no-deps -e .
