@@ -125,9 +125,11 @@ def cell_values(ref: FieldRef, field: Any, centroids: np.ndarray, material: str)
     cells lie outside it and ``ref`` does not say ``outside=nearest``."""
     values, outside = interpolate(field, centroids)
     if np.any(outside) and ref.outside == "error":
-        c = centroids[np.argmax(outside)]
+        c = centroids[outside]
+        span = ", ".join(f"{n} {c[:, i].min():g}..{c[:, i].max():g}" for n, i in
+                         (("x", 0), ("y", 1), ("z", 2)) if n in field.names)
         raise InputError(f"{ref.text()}: {int(outside.sum())} of {len(centroids)} cells of '{material}' lie "
-                         f"outside the field ({field.extent()}; first at x={c[0]:g}, y={c[1]:g}, z={c[2]:g} m); "
+                         f"outside the field (their centroids at {span} m; the field spans {field.extent()}); "
                          "extend the file or add ,outside=nearest to the option")
     return values
 

@@ -115,7 +115,8 @@ def test_outside_is_an_error_unless_nearest(tmp_path):
         args = (["clay"], pr.field_refs(mats), mesh.points, mesh.tets, mesh.cell_material, "")
         if outside == "error":
             with pytest.raises(InputError, match=r"field:.*map.csv: 12 of 48 cells of 'clay' lie outside the field "
-                                                 r"\(x 0..300 m, y 0..200 m; first at x=3.*add ,outside=nearest"):
+                                                 r"\(their centroids at x 325..375, y 25..175 m; the "
+                                                 r"field spans x 0..300 m, y 0..200 m\); extend.*add ,outside=nearest"):
                 pr.serial_field_values(*args)
         else:
             values = pr.serial_field_values(*args)[OPTION]
