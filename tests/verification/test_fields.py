@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import OEDOMETER, compare_runs, read_last_step, run_scene
+from conftest import OEDOMETER, TWO_BLOCKS, WUXI, compare_runs, read_last_step, run_scene
 
 NU, DP, H = 0.25, 0.1e6, 100.0
 OED_FACTOR = (1 - NU) / ((1 + NU) * (1 - 2 * NU))          # M / E = 1.2
@@ -126,3 +126,66 @@ def test_modulus_linear_in_depth_converges_at_rate_2(tmp_path):
     rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     assert errors[0] < 4e-3 and errors[-1] < 3e-4, errors
     assert np.all((rates > 1.8) & (rates < 2.2)), rates
+
+
+FLOW_BOX = """# a 2x2x2-cell box drained by one well
+-pfault_box_size 10,10,20
+-pfault_box_cells 2,2,2
+-pfault_material_soil_young_modulus {young}
+-pfault_material_soil_poisson_ratio 0.25
+-pfault_material_soil_hydraulic_conductivity {conductivity}
+-pfault_bc_xmin_type roller
+-pfault_bc_xmax_type roller
+-pfault_bc_ymin_type roller
+-pfault_bc_ymax_type roller
+-pfault_bc_bottom_type fixed
+-pfault_flow true
+-pfault_flow_wells 5,5
+-pfault_flow_well_screen -1,-15
+-pfault_flow_well_rate 0:0,1*day:3*L/s
+-pfault_flow_fixed_head_surfaces xmin
+-pfault_time_end 1*day
+-pfault_time_steps 2
+-pfault_solver mumps
+"""
+
+
+def test_uniform_fields_give_the_numbers_results(tmp_path):
+    """A field that holds one value everywhere gives the run of that number: the flow model's conductivity and
+    default storage (from a modulus field, per cell), and the fault's stiffness estimates (two blocks)."""
+    (tmp_path / "e.csv").write_text("z,E [MPa]\n-200,10\n0,10\n")
+    (tmp_path / "k.csv").write_text("x,y,K [m/day]\n-1,-1,1\n11,-1,1\n-1,11,1\n11,11,1\n")
+    for name, young, k in (("numbers", "10*MPa", "1*m/day"), ("fields", f"field:{tmp_path / 'e.csv'}",
+                                                               f"field:{tmp_path / 'k.csv'}")):
+        scene = tmp_path / f"flow_{name}.opts"
+        scene.write_text(FLOW_BOX.format(young=young, conductivity=k))
+        run_scene(str(scene), tmp_path / f"flow_{name}")
+    assert compare_runs(tmp_path / "flow_numbers", tmp_path / "flow_fields", rtol=1e-12) < 1e-12
+    run_scene(TWO_BLOCKS, tmp_path / "blocks_numbers")
+    (tmp_path / "e2.csv").write_text("z,E [MPa]\n-1,10\n0,10\n")
+    _, summary = run_scene(TWO_BLOCKS, tmp_path / "blocks_fields",
+                           extra=["-pfault_material_rock_young_modulus", f"field:{tmp_path / 'e2.csv'}"])
+    # (the opening of the stuck-and-slipping faces is round-off, 2e-16 m: not compared)
+    for name, keys in (("fields", ("displacement", "stress")), ("fault", ("slip", "traction_normal", "traction_shear",
+                                                                          "state"))):
+        with h5py.File(tmp_path / "blocks_numbers" / f"{name}.h5") as a, \
+                h5py.File(tmp_path / "blocks_fields" / f"{name}.h5") as b:
+            for key in keys:
+                x, y = a["steps/000001"][key][()], b["steps/000001"][key][()]
+                assert np.max(np.abs(x - y)) <= 1e-12 * np.max(np.abs(x)), (name, key)
+    assert summary["max_fault_slip_m"] > 0.1
+
+
+def test_site_example_clay_map(tmp_path):
+    """config/site_example/clay_modulus.opts on the Wuxi scene (coarse): the clay's cells take the map's
+    bilinear values (6-10 MPa), the settlement grows where the clay is softer than the scene's 8 MPa."""
+    from pfault import properties as pr
+    from pfault.io.field_files import read_field
+    _, summary = run_scene(WUXI, tmp_path / "map", extra=[
+        "-options_file", "config/site_example/clay_modulus.opts", "-pfault_mesh_size_factor", "3",
+        "-pfault_time_steps", "1"])
+    field = read_field("config/site_example/clay_modulus.csv", "pfault_material_clay_young_modulus", "Pa")
+    assert field.is_grid and field.values.min() == 6e6 and field.values.max() == 10e6
+    values, outside = pr.interpolate(field, np.array([[1000.0, 5000.0, -10.0], [250.0, 2500.0, -60.0]]))
+    assert not outside.any() and values == pytest.approx([10e6, 10e6 - 2.25e6 - 0.5e6], rel=1e-14)
+    assert summary["converged"] and summary["max_subsidence_m"] > 0
