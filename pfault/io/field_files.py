@@ -260,4 +260,5 @@ def _coordinate(values, units, where, name):
     values = np.asarray(values, dtype=float)
     if values.ndim != 1:
         raise InputError(f"{where}: coordinate variable {name} is not 1-D; give 1-D x, y, z variables")
+    _check_finite(values, where, f"{name} coordinates")
     return values * _length_factor(units, where, name)
