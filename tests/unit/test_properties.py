@@ -86,6 +86,16 @@ def test_same_grid_in_hdf5_netcdf_and_csv(tmp_path):
     for name in ("map.h5", "map.nc"):
         field = read_field(str(tmp_path / name), OPTION, "Pa", default_variable="young_modulus")
         assert pr.interpolate(field, pts)[0] == pytest.approx(ref_values, rel=1e-14), name
+    # NetCDF-4 as the netCDF library writes it (HDF5 dimension scales): a variable stored (x, y) by its dimensions
+    with h5py.File(tmp_path / "map4.nc", "w") as h5:
+        h5["x"], h5["y"] = MAP_X, MAP_Y
+        h5["x"].make_scale("x")
+        h5["y"].make_scale("y")
+        h5["young_modulus"] = e.T * 1e6
+        h5["young_modulus"].dims[0].attach_scale(h5["x"])
+        h5["young_modulus"].dims[1].attach_scale(h5["y"])
+    field = read_field(str(tmp_path / "map4.nc"), OPTION, "Pa")
+    assert pr.interpolate(field, pts)[0] == pytest.approx(ref_values, rel=1e-14)
     # 3-D grid (z, y, x) varying in z only
     with h5py.File(tmp_path / "cube.h5", "w") as h5:
         h5["x"], h5["y"], h5["z"] = [0.0, 10.0], [0.0, 10.0], [-100.0, 0.0]
