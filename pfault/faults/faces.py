@@ -24,8 +24,9 @@ ADD = PETSc.InsertMode.ADD_VALUES
 class FaultFaces:
     """The owned fault faces (serial ids ``face``, ordered; ``nf`` of ``nf_total``): minus cell and local face,
     vertices, area, unit normal (minus -> plus) and local frames ``R``, the fault of each face and whether it is a
-    Lagrange face, the Young's modulus of the minus cell (``young``: per local cell), the displacement dofs of both sides (local ``u_dofs``, global
-    ``g_u``) and the multiplier dofs (``lm_dofs``, ``g_lm``; -1 on penalty faces)."""
+    Lagrange face, the Young's modulus of the minus cell (from ``young``, per local cell), the displacement dofs of
+    both sides (local ``u_dofs``, global ``g_u``) and the multiplier dofs (``lm_dofs``, ``g_lm``; -1 on penalty
+    faces)."""
 
     def __init__(self, mesh: Any, dofmap: Any, settings: list, fault_id: np.ndarray, young: np.ndarray,
                  bc_local: np.ndarray, lgmap: Any) -> None:
