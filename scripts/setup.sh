@@ -23,8 +23,8 @@ if [ ! -x .venv/bin/python ]; then
 fi
 if ! .venv/bin/python -c "import gmsh, meshio, scipy, pytest, matplotlib" >/dev/null 2>&1; then
   echo "setup: installing gmsh, meshio, scipy, pytest, matplotlib into .venv"
-  # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command; scipy 1.10-1.11 is the
-  # series whose wheels accept Debian 12's numpy 1.24 (newer ones pull numpy 2)
+  # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command; scipy held to the
+  # series tested with Debian 12's numpy 1.24 (1.10-1.11; scipy 1.16 and later cannot install beside it)
   .venv/bin/pip install -q --disable-pip-version-check gmsh meshio "scipy>=1.10,<1.12" pytest matplotlib "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
 fi
 if ! .venv/bin/python -I -c "import pfault, sys; sys.exit(0 if pfault.__file__.startswith('$PWD') else 1)" >/dev/null 2>&1; then
