@@ -79,37 +79,41 @@ def _as_well(w):
 
 @dataclass(frozen=True)
 class FlowSettings:
-    conductivity: np.ndarray      # (n_materials,) m/s
-    storage: np.ndarray           # (n_materials,) 1/m
+    conductivity: tuple           # per material: m/s, or a field (pfault.properties.FieldRef)
+    storage: tuple                # per material: 1/m, a field, or None: the default from the skeleton per cell
     wells: tuple
     fixed_head_surfaces: tuple
     substeps: int
+    void_ratio: tuple = ()        # per material: a number or a field (the default storage of a None entry)
 
 
 # -- options ---------------------------------------------------------------------------------------
 def read_flow_settings(reader: OptionReader, material_names: Sequence[str], materials: Sequence[Material],
                        surface_names: Collection[str], water_density: float, gravity: float) -> FlowSettings:
     """Flow inputs from -pfault_ options (call only when -pfault_flow is true); same verdict on every rank."""
-    cond, stor = [], []
+    from ..properties import is_field
+    cond, stor, voids = [], [], []
     for name, m in zip(material_names, materials):
         p = f"pfault_material_{name}_"
         k = reader.get(p + "hydraulic_conductivity")
         if k is None:
             raise InputError(f"missing -{p}hydraulic_conductivity (m/s) for physical volume '{name}' "
                              "(needed by -pfault_flow)")
-        if not k > 0:
+        if not is_field(k) and not k > 0:
             raise InputError(f"-{p}hydraulic_conductivity: must be positive, got {k}")
         e = reader.get(p + "void_ratio")
-        if not e > 0:
+        if not is_field(e) and not e > 0:
             raise InputError(f"-{p}void_ratio: must be positive, got {e}")
         ss = reader.get(p + "specific_storage")
-        if ss is None:
+        skeleton = (m.young_modulus, m.poisson_ratio, e, m.biot_coefficient)
+        if ss is None and not any(is_field(v) for v in skeleton):
             ss = float(fl.specific_storage(m.young_modulus, m.poisson_ratio, e, m.biot_coefficient,
                                            water_density, gravity))
-        elif not ss > 0:
+        elif ss is not None and not is_field(ss) and not ss > 0:
             raise InputError(f"-{p}specific_storage: must be positive, got {ss}")
         cond.append(k)
         stor.append(ss)
+        voids.append(e)
     xy = reader.get("pfault_flow_wells")
     screen = reader.get("pfault_flow_well_screen")
     rate = reader.get("pfault_flow_well_rate")
@@ -132,7 +136,7 @@ def read_flow_settings(reader: OptionReader, material_names: Sequence[str], mate
     substeps = reader.get("pfault_flow_substeps")
     if substeps < 1:
         raise InputError("-pfault_flow_substeps: need at least 1")
-    return FlowSettings(np.array(cond), np.array(stor), wells, surfaces, substeps)
+    return FlowSettings(tuple(cond), tuple(stor), wells, surfaces, substeps, tuple(voids))
 
 
 def fixed_head_vertices(serial: SerialMesh, surface_names: Iterable[str]) -> np.ndarray:
