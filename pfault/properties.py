@@ -21,7 +21,6 @@ A property given as a number fills its material's cells with that number, as bef
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +29,7 @@ import numpy as np
 
 from .errors import InputError
 from .io.probes import mesh_to_site
+from .paths import beside_scene
 
 FIELD_PREFIX = "field:"
 OUTSIDE = ("error", "nearest")
@@ -140,21 +140,13 @@ def check_range(ref: FieldRef, field: Any) -> None:
                          "values (in the option's unit unless the file states its own)")
 
 
-def resolve_path(path: str, scene_file: str) -> str:
-    """A field's path as given if it is there, else beside the scene file."""
-    if os.path.isabs(path) or os.path.exists(path) or not scene_file:
-        return path
-    beside = os.path.join(os.path.dirname(scene_file), path)
-    return beside if os.path.exists(beside) else path
-
-
 def read_fields(refs: Sequence[FieldRef], scene_file: str) -> dict[str, Any]:
     """{option: SpatialField} of the field options, read and checked (rank 0)."""
     from .io.field_files import read_field
     out = {}
     for ref in refs:
         prop = property_name(ref.option)
-        field = read_field(resolve_path(ref.path, scene_file), ref.option, ref.unit, ref.variable, prop)
+        field = read_field(beside_scene(ref.path, scene_file), ref.option, ref.unit, ref.variable, prop)
         check_range(ref, field)
         out[ref.option] = field
     return out

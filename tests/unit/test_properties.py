@@ -10,6 +10,7 @@ import pytest
 
 from pfault import properties as pr
 from pfault.errors import InputError
+from pfault.paths import beside_scene
 from pfault.io.field_files import read_field
 from pfault.mesh.box import box_mesh
 from pfault.scene import Material
@@ -171,5 +172,5 @@ def test_wrong_variable_name_and_syntax(tmp_path):
 def test_path_beside_the_scene(tmp_path, monkeypatch):
     write_map_csv(tmp_path / "map.csv")
     monkeypatch.chdir("/")
-    assert pr.resolve_path("map.csv", str(tmp_path / "scene.opts")) == str(tmp_path / "map.csv")
-    assert pr.resolve_path("nowhere.csv", str(tmp_path / "scene.opts")) == "nowhere.csv"
+    assert beside_scene("map.csv", str(tmp_path / "scene.opts")) == str(tmp_path / "map.csv")
+    assert beside_scene("nowhere.csv", str(tmp_path / "scene.opts")) == "nowhere.csv"

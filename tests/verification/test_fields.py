@@ -15,7 +15,9 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import OEDOMETER, TWO_BLOCKS, WUXI, compare_runs, read_last_step, run_scene
+from conftest import OEDOMETER, TWO_BLOCKS, compare_runs, read_last_step, run_scene
+
+SITE = "config/site_example/site.opts"
 
 NU, DP, H = 0.25, 0.1e6, 100.0
 OED_FACTOR = (1 - NU) / ((1 + NU) * (1 - 2 * NU))          # M / E = 1.2
@@ -177,15 +179,25 @@ def test_uniform_fields_give_the_numbers_results(tmp_path):
 
 
 def test_site_example_clay_map(tmp_path):
-    """config/site_example/clay_modulus.opts on the Wuxi scene (coarse): the clay's cells take the map's
-    bilinear values (6-10 MPa), the settlement grows where the clay is softer than the scene's 8 MPa."""
-    from pfault import properties as pr
+    """config/site_example/site.opts: the clay's modulus from a map in site coordinates (4.2-7 MPa at its nodes, the
+    mesh placed by -pfault_mesh_origin). Every station's settlement lies between those of the same site with the clay uniformly at
+    the map's smallest and largest value, and strictly inside where the map is not at either bound."""
     from pfault.io.field_files import read_field
-    _, summary = run_scene(WUXI, tmp_path / "map", extra=[
-        "-options_file", "config/site_example/clay_modulus.opts", "-pfault_mesh_size_factor", "3",
-        "-pfault_time_steps", "1"])
-    field = read_field("config/site_example/clay_modulus.csv", "pfault_material_clay_young_modulus", "Pa")
-    assert field.is_grid and field.values.min() == 6e6 and field.values.max() == 10e6
-    values, outside = pr.interpolate(field, np.array([[1000.0, 5000.0, -10.0], [250.0, 2500.0, -60.0]]))
-    assert not outside.any() and values == pytest.approx([10e6, 10e6 - 2.25e6 - 0.5e6], rel=1e-14)
-    assert summary["converged"] and summary["max_subsidence_m"] > 0
+    field = read_field("config/site_example/site_clay_modulus.csv", "pfault_material_clay_young_modulus", "Pa")
+    lo_e, hi_e = field.values.min(), field.values.max()
+    assert field.is_grid and 4e6 <= lo_e < 4.5e6 and 6.8e6 < hi_e <= 7e6
+    one_step = ["-pfault_time_end", "2*year", "-pfault_time_steps", "1", "-pfault_insar_los", "0,0,1"]
+    settle = {}
+    for name, modulus in (("map", None), ("soft", f"{lo_e:.17g}"), ("stiff", f"{hi_e:.17g}")):
+        extra = one_step + ([] if modulus is None else ["-pfault_material_clay_young_modulus", modulus])
+        _, summary = run_scene(SITE, tmp_path / name, extra=extra)
+        assert summary["converged"]
+        rows = [line.split(",") for line in (tmp_path / name / "station_displacement.csv").read_text().splitlines()[1:]]
+        settle[name] = {r[0]: -float(r[4]) for r in rows if float(r[1]) > 0}
+    assert set(settle["map"]) == {"WELL_BM", "GNSS_N", "GNSS_W", "EXT_30"}
+    for station, w in settle["map"].items():
+        assert settle["stiff"][station] < w < settle["soft"][station], (station, settle)
+    # beside the well the clay is at the soft bound: much closer to the soft run than to the stiff one
+    w, lo, hi = settle["map"]["WELL_BM"], settle["stiff"]["WELL_BM"], settle["soft"]["WELL_BM"]
+    assert (hi - w) < 0.5 * (w - lo), (lo, w, hi)
+
