@@ -22,8 +22,8 @@ summary.json, is ``DIR/scenarios.csv``, printed as a table, and ``DIR/scenarios.
 with its exit code and error line and no values; the other plans complete.
 
 Exit codes: 0 every plan completed; 1 bad input (the scene, the plans file: an unknown option, a plan that
-sets nothing, two plans with one name), one line and nothing written; 2 usage; 8 a plan failed (the table says
-which and why). This module does not import PETSc.
+sets nothing, two plans with one name), one line and nothing written; 2 usage; 4 the output directory cannot be
+made or written; 8 a plan failed (the table says which and why). This module does not import PETSc.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from .errors import EXIT_INPUT, EXIT_USAGE, InputError
+from .errors import EXIT_INPUT, EXIT_OUTPUT, EXIT_USAGE, InputError, OutputError
 from .options import spec_for
 from .optionsfile import ArgumentError, is_option_name, read_options_file
 from .tools.runs import Run, RunResult, read_summary, run_many
@@ -273,8 +273,12 @@ def run_plans(args: dict) -> int:
     common, plans = read_plans(plans_path)
     command_line = args["options"]
     outdir = args["output"] or os.path.join("runs", os.path.splitext(os.path.basename(plans_path))[0])
-    if os.path.exists(outdir) and not os.path.isdir(outdir):
-        raise InputError(f"--output {outdir}: exists and is not a directory; give a directory")
+    try:
+        os.makedirs(outdir, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"--output {outdir}: cannot make the directory ({exc.strerror}); give another") from None
+    if not os.access(outdir, os.W_OK):
+        raise OutputError(f"--output {outdir}: not writable; give another directory")
     ranks = args["ranks"]
     workers = args["workers"] or max(1, (os.cpu_count() or 1) // ranks)
     # (name, the options it changes, all it is given): a plan's own options over the common ones, the command
@@ -304,6 +308,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except InputError as exc:
         sys.stderr.write(f"pfault: error: {exc}\n")
         return EXIT_INPUT
+    except OutputError as exc:
+        sys.stderr.write(f"pfault: error: {exc}\n")
+        return EXIT_OUTPUT
 
 
 if __name__ == "__main__":

@@ -122,7 +122,8 @@ def test_two_ranks_per_plan_agree_with_one(box_plans, tmp_path):
     one, two = table(out1), table(out2)
     assert summary(out2, "halved")["ranks"] == 2
     for plan in ("baseline", "halved"):
-        for key in ("max_subsidence_m", "max_horizontal_strain", "max_angular_distortion"):
+        for key in ("max_subsidence_m", "max_horizontal_strain", "max_angular_distortion",
+                    "max_fissure_prone_length_m"):
             assert float(two[plan][key]) == pytest.approx(float(one[plan][key]), rel=1e-10), (plan, key)
 
 
@@ -156,3 +157,11 @@ def test_a_bad_scene_or_missing_plans_file_is_one_line(tmp_path):
     proc = subprocess.run([PY, "-m", "pfault.scenarios", "config/oedometer.opts"], cwd=REPO, env=mpi_env(),
                           capture_output=True, text=True, timeout=TIMEOUT)
     assert proc.returncode == 2 and proc.stderr.startswith("usage: python -m pfault.scenarios")
+
+
+def test_an_output_directory_that_cannot_be_made_is_one_line(tmp_path):
+    (tmp_path / "out").write_text("a file in the way")
+    proc, out = scenarios(tmp_path, PLANS)
+    assert proc.returncode == 4, proc.stdout + proc.stderr
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith(f"pfault: error: --output {out}: cannot make")
+    assert out.read_text() == "a file in the way"
