@@ -23,7 +23,8 @@ with its exit code and error line and no values; the other plans complete.
 
 Exit codes: 0 every plan completed; 1 bad input (the scene, the plans file: an unknown option, a plan that
 sets nothing, two plans with one name), one line and nothing written; 2 usage; 4 the output directory cannot be
-made or written; 8 a plan failed (the table says which and why). This module does not import PETSc.
+made or written; 7 interrupted (Ctrl-C: the plans under way are stopped, no table); 8 a plan failed (the
+table says which and why). This module does not import PETSc.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from .errors import EXIT_INPUT, EXIT_OUTPUT, EXIT_USAGE, InputError, OutputError
+from .errors import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE, InputError, OutputError
 from .options import spec_for
 from .optionsfile import ArgumentError, is_option_name, read_options_file
 from .tools.runs import Run, RunResult, read_summary, run_many
@@ -311,6 +312,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OutputError as exc:
         sys.stderr.write(f"pfault: error: {exc}\n")
         return EXIT_OUTPUT
+    except KeyboardInterrupt:
+        sys.stderr.write("pfault: interrupted: the plans under way were stopped; no table written\n")
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":
