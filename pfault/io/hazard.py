@@ -154,9 +154,10 @@ def maxima(points: np.ndarray, triangles: np.ndarray,
     return out
 
 
-def summary_maxima(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """The largest hazard values over the step records that have them, where and when they occur."""
-    out: dict[str, Any] = {}
+def summary_maxima(records: Sequence[dict[str, Any]], strain_threshold: float | None = None) -> dict[str, Any]:
+    """The largest hazard values over the step records that have them, where and when they occur, and the
+    strain threshold of the fissure-prone length."""
+    out: dict[str, Any] = {} if strain_threshold is None else {"hazard_strain_threshold": float(strain_threshold)}
     for name in FIELDS:
         key = f"max_{name}"
         have = [r for r in records if r.get(key) is not None]
