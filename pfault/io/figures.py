@@ -568,7 +568,8 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     return _save(fig, out)
 
 
-def _fissure_prone_outline(ax, run_dir, pts, tris, strain, t, km):
+def _fissure_prone_outline(ax: Any, run_dir: str, pts: np.ndarray, tris: np.ndarray, strain: np.ndarray, t: float,
+                           km: float) -> None:
     """The border of the triangles whose strain exceeds summary.json's hazard_strain_threshold, labelled with
     the fissure-prone length of the step at time t (pfault.io.hazard); nothing for a run without them."""
     from matplotlib.collections import LineCollection
