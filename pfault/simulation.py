@@ -3,7 +3,6 @@ and by tests."""
 
 from __future__ import annotations
 
-import sys
 import time
 from typing import Any
 
@@ -13,6 +12,7 @@ from petsc4py import PETSc
 from . import run as loop
 from .effects import EffectCosts
 from .errors import InputError
+from .io.summary import RunSummary
 from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLine, RunOutput, SummaryObserver,
                            format_time, progress_line)
 from .model import Model, build_model
@@ -69,17 +69,18 @@ class Simulation:
                 PETSc.Sys.Print(progress_line(0, rec))
         self.costs.mark_setup()
         self.output = RunOutput(m, self.state, self.argv, m.scene.restart_dir, self.restart_step)
+        self.composer = RunSummary(m, self.state, self.solver, self.costs, self.restart_step)
         converged, stop = loop.time_loop(m, self.state, self.solver, self.observers(self.output, records), times,
                                          first, offset, records, self.wall, self._open_output)
         self.output.close()
-        self.summary = self._summary(records, converged, stop)
+        self.summary = self.composer.compose(records, converged, stop)
         return self.summary
 
     def observers(self, output: RunOutput, records: list) -> list[Observer]:
         """The observers of every step, in the order they see it: the progress line, the fields, the checkpoint
         and the summary (``records``: the run's step records, which the last two write)."""
         return [ProgressLine(), FieldOutput(output), CheckpointObserver(output, self.state, records),
-                SummaryObserver(output, self._summary, records)]
+                SummaryObserver(output, self.composer, records)]
 
     def _open_output(self) -> None:
         """After the first solve (every solver option has been read by then): reject unused options, then open
@@ -112,58 +113,6 @@ class Simulation:
         self.restart_step = step
         PETSc.Sys.Print(f"pfault: continuing {restart_dir} after step {step} (t = {format_time(t).strip()})")
         return records, index, step - index     # the checkpoint's records end at its step
-
-    # ------------------------------------------------------------------------------------------
-    def _summary(self, steps: list, converged: bool, stop: str | None, running: bool = False) -> dict:
-        m = self.model
-        last = [r for r in steps if "max_subsidence_m" in r]
-        summary = {
-            "scene": m.settings.scene,
-            "ranks": self.comm.size,
-            "mesh": {"nodes": int(m.mesh.n_global_vertices), "cells": int(m.mesh.n_global_cells),
-                     "fault_faces": int(len(m.fault_id)) if m.faults is not None else 0},
-            "fields": list(m.dofmap.fields),
-            "dofs": int(self.state.u.getSize()),
-            "solver": self._solver_record(steps),
-            "steps": steps,
-            "max_subsidence_m": max([r["max_subsidence_m"] for r in last], default=0.0),
-            "max_horizontal_displacement_m": max([r["max_horizontal_displacement_m"] for r in last], default=0.0),
-            "final_subsidence_m": last[-1]["max_subsidence_m"] if last else 0.0,
-            "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
-            "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
-            "memory_peak_mib": self._memory_peak_mib(),
-            "converged": bool(converged),
-            "effects": self.costs.record(m.scene.effects, len([r for r in steps if not r.get("initial")])),
-            # a run in progress, or one killed before it could say how it ended, reads running: true
-            "running": bool(running),
-            "interrupted": stop is not None,
-            "completed_steps": [r["step"] for r in last if r["converged"]],
-        }
-        from .io.hazard import summary_maxima
-        summary.update(summary_maxima(last))
-        if stop is not None:
-            summary["stop_signal"] = stop
-        if m.scene.restart_dir:
-            summary["restart"] = {"from": m.scene.restart_dir, "step": self.restart_step}
-        return summary
-
-    def _solver_record(self, steps: list) -> dict:
-        """The linear solver and its iterations: Krylov iterations per Newton iteration over the run (each
-        step's own is in its record, ``ksp_per_newton``)."""
-        ksp_type, pc_type = self.solver.ksp_types()
-        newton = sum(r.get("newton_its", 0) for r in steps)
-        krylov = sum(r.get("ksp_its", 0) for r in steps)
-        return {"file": self.model.solver_file, "ksp_type": ksp_type, "pc_type": pc_type,
-                "newton_its": int(newton), "ksp_its": int(krylov),
-                "ksp_per_newton": krylov / newton if newton else 0.0,
-                "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
-
-    def _memory_peak_mib(self) -> list:
-        """The largest resident set size of each rank's process so far, in MiB (a list in rank order; collective)."""
-        import resource
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux, bytes on macOS
-        mib = peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
-        return [round(m, 1) for m in self.comm.tompi4py().allgather(mib)]
 
     # ------------------------------------------------------------------------------------------
     def write_summary(self, total: float) -> None:

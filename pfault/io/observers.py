@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import errno
 import shutil
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from petsc4py import PETSc
 
 from ..effects import logged
 from ..errors import EXIT_NOT_CONVERGED, InputError, OutputError, run_on_root
+from .summary import RunSummary
 
 
 def format_time(t: float) -> str:
@@ -281,8 +282,9 @@ class SummaryObserver(Observer):
     """summary.json after every step (``running``: true until the run ends); the first completed step puts the
     run's directory in place."""
 
-    def __init__(self, output: RunOutput, compose: Callable[..., dict], records: list) -> None:
-        self.output, self.compose, self.records = output, compose, records
+    def __init__(self, output: RunOutput, summary: RunSummary, records: list) -> None:
+        self.output, self.summary, self.records = output, summary, records
 
     def step_done(self, result: Any) -> None:
-        self.output.write_summary(self.compose(self.records, result.record["converged"], None, running=True))
+        self.output.write_summary(self.summary.compose(self.records, result.record["converged"], None,
+                                                       running=True))
