@@ -38,7 +38,6 @@ from pfault.simulation import Simulation  # noqa: E402
 comm = PETSc.COMM_WORLD
 mpi = comm.tompi4py()
 sim = Simulation(scene, sys.argv)
-sim.setup()
 summary = sim.run()
 step, t = summary["steps"][-1]["step"], summary["steps"][-1]["time_s"]
 directory = os.path.join(os.path.dirname(sim.output.run_path), "checkpoints")

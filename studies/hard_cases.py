@@ -491,7 +491,6 @@ def _faces_per_rank_main(argv):
     from pfault.simulation import Simulation
     sim = Simulation(scene, [scene] + rest)
     try:
-        sim.setup()
         faces = sim.model.faults.faces
         counts = [int(c) for c in faces.mpi.allgather(faces.nf)]
     finally:

@@ -63,9 +63,7 @@ class Twice(Simulation):
 
 comm = PETSc.COMM_WORLD
 sim = Twice(scene, sys.argv)
-sim.setup()
-sim.run()
-run_on_root(comm, sim.write_summary, 0.0)
+run_on_root(comm, sim.write_summary, sim.run(), 0.0)
 mpi = comm.tompi4py()
 blocks = {}
 ck = sim.output.checkpoint
