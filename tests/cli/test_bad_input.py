@@ -17,32 +17,12 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from conftest import OEDOMETER, PY, REPO, TWO_BLOCKS, mpi_env
+from conftest import FLOW_BOX, OEDOMETER, PY, REPO, TWO_BLOCKS, mpi_env
 
 OED = OEDOMETER
 TIMEOUT = 60
 FREE_SIDES = ["-pfault_bc_xmin_type", "free", "-pfault_bc_xmax_type", "free", "-pfault_bc_ymin_type", "free",
               "-pfault_bc_ymax_type", "free"]
-FLOW_SCENE = """# a 2x2x2-cell box drained by one well
--pfault_box_size 10,10,20
--pfault_box_cells 2,2,2
--pfault_material_soil_young_modulus 10*MPa
--pfault_material_soil_poisson_ratio 0.25
--pfault_material_soil_hydraulic_conductivity 1*m/day
--pfault_bc_xmin_type roller
--pfault_bc_xmax_type roller
--pfault_bc_ymin_type roller
--pfault_bc_ymax_type roller
--pfault_bc_bottom_type fixed
--pfault_flow true
--pfault_flow_wells 5,5
--pfault_flow_well_screen -1,-15
--pfault_flow_well_rate 0:0,1*day:3*L/s
--pfault_flow_fixed_head_surfaces xmin
--pfault_time_end 1*day
--pfault_time_steps 2
--pfault_solver mumps
-"""
 
 
 def run_pfault(args, ranks, timeout=TIMEOUT):
@@ -202,7 +182,8 @@ CASES = [
     Case("output_larger_than_disk", scene("-pfault_time_steps", "1000000000000", "-pfault_box_cells", "1,1,1"), 4,
          "the output needs about", "kept"),
     # a solve that fails: exit 3
-    Case("flow_not_converged", scene_file(FLOW_SCENE, "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
+    Case("flow_not_converged", scene_file(FLOW_BOX, "-pfault_time_end", "1*day", "-pfault_time_steps", "2",
+                                          "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
          "groundwater flow: KSP flow_ did not converge at t = 43200 s (reason -3)", "kept"),
     # the geostatic gravity solve fails: no initial stress from a wrong state (it opened the faults of the fault
     # scene at step 0 and its run went on)

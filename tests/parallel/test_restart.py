@@ -27,45 +27,26 @@ import os
 import numpy as np
 import pytest
 
-from conftest import FISSURE_BOX, OEDOMETER, QUERETARO, WUXI, compare_runs, run_scene
+from conftest import FISSURE_BOX, OEDOMETER, QUERETARO, WUXI, compare_runs, run_scene, write_flow_box
 
 RTOL = 1e-10
+FLOW_BOX_FILE = "flow_box.opts"     # conftest.FLOW_BOX, written by write_flow_box
 SCENES = {
     "oedometer": (OEDOMETER, (), "10", "5"),
     "queretaro": (QUERETARO, ("-pfault_mesh_size_factor", "6", "-flow_ksp_rtol", "1e-13", "-ksp_atol",
                                             "0"), "10*year", "5*year"),
     "wuxi": (WUXI, ("-pfault_mesh_size_factor", "4", "-ksp_atol", "0"), "2*year",
              "1*year"),   # slip and open faces
-    "flow": ("flow_box.opts", (), "2*day", "1*day"),
+    "flow": (FLOW_BOX_FILE, (), "2*day", "1*day"),
 }
-FLOW_BOX = """# a 2x2x2-cell box drained by one well, no fault
--pfault_box_size 10,10,20
--pfault_box_cells 2,2,2
--pfault_material_soil_young_modulus 10*MPa
--pfault_material_soil_poisson_ratio 0.25
--pfault_material_soil_hydraulic_conductivity 1*m/day
--pfault_bc_xmin_type roller
--pfault_bc_xmax_type roller
--pfault_bc_ymin_type roller
--pfault_bc_ymax_type roller
--pfault_bc_bottom_type fixed
--pfault_flow true
--pfault_flow_wells 5,5
--pfault_flow_well_screen -1,-15
--pfault_flow_well_rate 0:0,1*day:3*L/s
--pfault_flow_fixed_head_surfaces xmin
--pfault_solver mumps
-"""
 
 
 def scene_file(tmp_path, name):
     """Options file of SCENES[name] (the flow box is written into tmp_path)."""
     opts = SCENES[name][0]
-    if opts == "flow_box.opts":
-        path = tmp_path / opts
-        path.write_text(FLOW_BOX)
-        return str(path)
-    return opts
+    return write_flow_box(tmp_path) if opts == FLOW_BOX_FILE else opts
+
+
 def _steps(extra, n, end):
     return [*extra, "-pfault_time_steps", str(n), "-pfault_time_end", end]
 
@@ -200,11 +181,11 @@ def test_restart_may_change_the_load_only_after_the_checkpoint(tmp_path):
     compare_runs(ref, part, RTOL)
 
 
-def test_restart_may_change_the_well_rate_only_after_the_checkpoint(tmp_path):
+def test_restart_may_change_the_well_rate_only_after_the_checkpoint(tmp_path, flow_box):
     """The flow box on 2 ranks, pumped at 3 L/s from day 1 (ramped up from 0 at t = 0), stopped after 1 day:
     continued with another rate on the first day it is an input error; with the rate doubled from day 1 to
     day 2 it equals the run pumped so from the start, and its drawdown differs from the unchanged one's."""
-    opts = scene_file(tmp_path, "flow")
+    opts = flow_box
     part, ref, same = tmp_path / "part", tmp_path / "ref", tmp_path / "same"
     run_scene(opts, part, ranks=2, extra=_steps((), 2, "1*day"))
     proc, _ = run_scene(opts, part, ranks=2, extra=[*_steps((), 4, "2*day"), "-pfault_restart", str(part),
