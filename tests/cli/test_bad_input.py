@@ -20,6 +20,7 @@ import pytest
 from conftest import FLOW_BOX, OEDOMETER, PY, REPO, TWO_BLOCKS, mpi_env
 
 OED = OEDOMETER
+OED_FILE = os.path.join(REPO, OEDOMETER)      # included from files in tmp (an include is relative to its file)
 TIMEOUT = 60
 FREE_SIDES = ["-pfault_bc_xmin_type", "free", "-pfault_bc_xmax_type", "free", "-pfault_bc_ymin_type", "free",
               "-pfault_bc_ymax_type", "free"]
@@ -74,7 +75,7 @@ def inject(kind, rank, step):
 
 def include_loop(tmp, out, ranks):
     """a.opts includes b.opts, which includes a.opts again."""
-    write(tmp / "b.opts", f"-options_file {OED}\n-options_file {tmp / 'a.opts'}\n")
+    write(tmp / "b.opts", f"-options_file {OED_FILE}\n-options_file {tmp / 'a.opts'}\n")
     return ["-m", "pfault", write(tmp / "a.opts", f"-options_file {tmp / 'b.opts'}\n"), "-pfault_output_dir", str(out)]
 
 
@@ -104,13 +105,13 @@ CASES = [
          "the scene file 'config/oedometer.opts' must come first"),
     # scene files: exit 1
     Case("binary_scene", scene_file(BINARY), 1, "scene.opts: not a text options file (binary content)"),
-    Case("line_without_option", scene_file(f"-options_file {OED}\nfoo bar\n"), 1,
+    Case("line_without_option", scene_file(f"-options_file {OED_FILE}\nfoo bar\n"), 1,
          "scene.opts line 2: 'foo' is not an option name"),
-    Case("two_options_on_a_line", scene_file(f"-options_file {OED}\n-pfault_time_steps 2 -pfault_time_end 3\n"),
+    Case("two_options_on_a_line", scene_file(f"-options_file {OED_FILE}\n-pfault_time_steps 2 -pfault_time_end 3\n"),
          1, "scene.opts line 2: two options on one line (-pfault_time_steps ... -pfault_time_end)"),
-    Case("two_values", scene_file(f"-options_file {OED}\n-pfault_box_size 10, 10, 100\n"), 1,
+    Case("two_values", scene_file(f"-options_file {OED_FILE}\n-pfault_box_size 10, 10, 100\n"), 1,
          "line 2: -pfault_box_size has more than one value ('10, 10, 100')"),
-    Case("missing_nested_file", scene_file(f"-options_file {OED}\n-options_file config/solver/none.opts\n"), 1,
+    Case("missing_nested_file", scene_file(f"-options_file {OED_FILE}\n-options_file config/solver/none.opts\n"), 1,
          "line 2: -options_file config/solver/none.opts: no such file"),
     Case("include_loop", include_loop, 1, "is already being read (the files include each other)"),
     Case("malformed_solver_file", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", str(out),
@@ -320,7 +321,7 @@ def test_box_larger_than_memory(tmp_path):
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_duplicate_option_in_one_file_warns(tmp_path, ranks):
     """An option twice in the same file: one warning naming the value used; the run goes on."""
-    path = write(tmp_path / "scene.opts", f"-options_file {OED}\n-pfault_time_steps 2\n# later\n-pfault_time_steps 3\n")
+    path = write(tmp_path / "scene.opts", f"-options_file {OED_FILE}\n-pfault_time_steps 2\n# later\n-pfault_time_steps 3\n")
     code, stdout, stderr = run_pfault(["-m", "pfault", path, "-pfault_output_dir", str(tmp_path / "out")], ranks)
     assert code == 0, stderr
     warnings = [line for line in stderr.splitlines() if line.startswith("pfault: warning")]

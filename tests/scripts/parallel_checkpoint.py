@@ -18,8 +18,10 @@ import sys
 
 import petsc4py
 
+from pfault.optionsfile import petsc_arguments
+
 scene, gathered_dir, own_dir = sys.argv[1:4]
-petsc4py.init([sys.argv[0], "-options_file", scene] + sys.argv[4:])
+petsc4py.init([sys.argv[0]] + petsc_arguments(scene, sys.argv[4:]))
 from petsc4py import PETSc  # noqa: E402
 
 from pfault.errors import run_on_root  # noqa: E402

@@ -13,8 +13,10 @@ import sys
 
 import petsc4py
 
+from pfault.optionsfile import petsc_arguments
+
 scene, gathered_dir = sys.argv[1], sys.argv[2]
-petsc4py.init([sys.argv[0], "-options_file", scene] + sys.argv[3:])
+petsc4py.init([sys.argv[0]] + petsc_arguments(scene, sys.argv[3:]))
 from petsc4py import PETSc  # noqa: E402
 
 import numpy as np  # noqa: E402
