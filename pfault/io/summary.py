@@ -11,6 +11,8 @@ from __future__ import annotations
 import sys
 from typing import Any
 
+import numpy as np
+
 from .hazard import summary_maxima
 
 
@@ -50,6 +52,8 @@ class RunSummary:
             "interrupted": stop is not None,
             "completed_steps": [r["step"] for r in last if r["converged"]],
         }
+        if m.faults is not None:
+            summary["faults"] = fault_summary(m, last)
         summary.update(summary_maxima(last))
         if stop is not None:
             summary["stop_signal"] = stop
@@ -67,6 +71,22 @@ class RunSummary:
                 "newton_its": int(newton), "ksp_its": int(krylov),
                 "ksp_per_newton": krylov / newton if newton else 0.0,
                 "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
+
+
+def fault_summary(model: Any, steps: list) -> dict:
+    """Per fault (by name): its faces, the largest opening of an open face and slip of a face that has slid
+    over the steps ``steps`` (0 where none did), and its faces stuck, slipping and open at the last of them."""
+    names = [f.name for f in model.scene.fault_settings]
+    faces = np.bincount(model.fault_id, minlength=len(names))
+    out = {}
+    for k, name in enumerate(names):
+        per = [r["faults"][name] for r in steps if "faults" in r]
+        last = per[-1] if per else {}
+        out[name] = {"faces": int(faces[k]),
+                     "max_opening_m": max([p["max_opening_m"] for p in per], default=0.0),
+                     "max_slip_m": max([p["max_slip_m"] for p in per], default=0.0),
+                     **{key: last.get(key, 0) for key in ("faces_stuck", "faces_slipping", "faces_open")}}
+    return out
 
 
 def memory_peak_mib(comm: Any) -> list:

@@ -120,7 +120,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     part = tmp_path / "part"
     run_scene(opts, part, extra=_steps(extra, 2, half))
     with h5py.File(part / "checkpoint.h5", "r+") as h5:
-        assert h5.attrs["format"] == 4
+        assert h5.attrs["format"] == 5
         h5.attrs["format"] = 2
         h5["u/cell_ids"], h5["u/cell"] = np.zeros(0, np.int64), np.zeros((0, 0))
     before = {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)}
@@ -129,7 +129,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     assert proc.returncode == 1, proc.stderr
     assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
         f"pfault: error: -pfault_restart {part}: its checkpoint.h5 has format 2, written by another version of "
-        "pfault; this one reads format 4 (continue that run with the pfault that wrote it, or run it again)"]
+        "pfault; this one reads format 5 (continue that run with the pfault that wrote it, or run it again)"]
     assert {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)} == before
 
 
