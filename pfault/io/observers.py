@@ -168,7 +168,11 @@ class RunOutput:
         u_total = eq.local_array(state.u_ref if initial else state.u)
         dp = eq.loads.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
         sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
-        faults = _fault_fields(m.faults, u_total, u_rel, state.fault_slid) if m.faults is not None else None
+        faults = None
+        if m.faults is not None:
+            # the initial state: no face has slid yet, whenever it is written
+            slid = np.zeros_like(state.fault_slid) if initial else state.fault_slid
+            faults = _fault_fields(m.faults, u_total, u_rel, slid)
         head = m.source.vertex_head()
         return LocalStep(both, head, {"pore_pressure_change": dp, "stress": sig}, faults)
 

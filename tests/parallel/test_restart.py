@@ -27,7 +27,8 @@ import os
 import numpy as np
 import pytest
 
-from conftest import FISSURE_BOX, OEDOMETER, QUERETARO, WUXI, compare_runs, run_scene, write_flow_box
+from conftest import (FISSURE_BOX, OEDOMETER, QUERETARO, TWO_BLOCKS, WUXI, compare_runs, run_scene,
+                      write_flow_box)
 
 RTOL = 1e-10
 FLOW_BOX_FILE = "flow_box.opts"     # conftest.FLOW_BOX, written by write_flow_box
@@ -110,6 +111,33 @@ def test_restart_rejects_a_time_grid_without_the_checkpoint(tmp_path):
                         check=False)
     assert proc.returncode == 1 and "that run had" in proc.stderr
     assert sorted(os.listdir(part)) == before and not os.path.exists(other)
+
+
+def test_restart_reads_a_format_4_checkpoint_without_faults_only(tmp_path):
+    """Format 5 adds each fault face's slid flag: a format-4 checkpoint of a scene without faults continues as
+    before; one with faults (it has no flags) is refused in one line, before anything is written."""
+    import h5py
+    opts, extra, end, half = SCENES["oedometer"]
+    part = tmp_path / "part"
+    run_scene(opts, part, extra=_steps(extra, 2, half))
+    with h5py.File(part / "checkpoint.h5", "r+") as h5:
+        h5.attrs["format"] = 4
+    _, s = run_scene(opts, part, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part)])
+    assert s["converged"] and s["completed_steps"][-1] == 4
+    faulted = tmp_path / "faulted"
+    run_scene(TWO_BLOCKS, faulted, extra=_steps((), 1, "0.5"))
+    with h5py.File(faulted / "checkpoint.h5", "r+") as h5:
+        assert h5.attrs["format"] == 5 and h5["faults/slid"].shape == (h5.attrs["fault_faces"],)
+        h5.attrs["format"] = 4
+        del h5["faults/slid"]
+    before = {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)}
+    proc, _ = run_scene(TWO_BLOCKS, faulted, extra=[*_steps((), 2, "1"), "-pfault_restart", str(faulted)],
+                        check=False)
+    assert proc.returncode == 1, proc.stderr
+    assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
+        f"pfault: error: -pfault_restart {faulted}: its checkpoint.h5 has format 4, written by another version of "
+        "pfault; this one reads format 5 (continue that run with the pfault that wrote it, or run it again)"]
+    assert {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)} == before
 
 
 def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
