@@ -24,9 +24,8 @@ from pfault.simulation import Simulation  # noqa: E402
 
 t0 = time.perf_counter()
 sim = Simulation("config/demo.opts", sys.argv)
-sim.setup()
 summary = sim.run()
-sim.write_summary(time.perf_counter() - t0)
+sim.write_summary(summary, time.perf_counter() - t0)
 fig = {"ranks": PETSc.COMM_WORLD.size, "cells": summary["mesh"]["cells"], "dofs": summary["dofs"],
        "mesh_s": sim.wall["mesh"], "setup_s": sim.wall["setup"], "assembly_s": sim.model.equations.assembly_wall,
        "solve_s": sim.wall["solve"], "ksp_its": sum(s["ksp_its"] for s in summary["steps"]),

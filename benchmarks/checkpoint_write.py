@@ -15,6 +15,8 @@ import time
 
 import petsc4py
 
+from pfault.optionsfile import petsc_arguments
+
 args = sys.argv[1:]
 scene = args.pop(0) if args and not args[0].startswith("-") else "config/queretaro_calibrated.opts"
 repeat = 20
@@ -27,7 +29,7 @@ defaults = {"-pfault_mesh_size_factor": "2", "-pfault_time_steps": "1", "-pfault
 for k, v in defaults.items():
     if k not in args and not (k == "-pfault_mesh_size_factor" and "queretaro" not in scene):
         args += [k, v]
-petsc4py.init([sys.argv[0], "-options_file", scene] + args)
+petsc4py.init([sys.argv[0]] + petsc_arguments(scene, args))
 from petsc4py import PETSc  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -38,7 +40,6 @@ from pfault.simulation import Simulation  # noqa: E402
 comm = PETSc.COMM_WORLD
 mpi = comm.tompi4py()
 sim = Simulation(scene, sys.argv)
-sim.setup()
 summary = sim.run()
 step, t = summary["steps"][-1]["step"], summary["steps"][-1]["time_s"]
 directory = os.path.join(os.path.dirname(sim.output.run_path), "checkpoints")

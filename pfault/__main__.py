@@ -1,7 +1,8 @@
 """``python -m pfault SCENE.opts [-option value ...]``: runs a scene (a PETSc options file).
 
-petsc4py.init() must see the options before PETSc is imported, so the scene file is turned into
-``-options_file SCENE.opts`` ahead of the command-line options, which therefore override it.
+petsc4py.init() must see the options before PETSc is imported, so the scene file's options (its includes
+expanded, each found relative to the file that includes it: pfault.optionsfile.petsc_arguments) go ahead of
+the command-line options, which therefore override them.
 
 Before that, the command line and the options files (the scene and those it includes with
 ``-options_file``) are read here as PETSc will read them, so that a stray argument, a binary or malformed
@@ -19,7 +20,7 @@ from collections.abc import Sequence
 
 from pfault.errors import EXIT_INPUT, EXIT_USAGE
 from pfault.optionsfile import (COMMAND_LINE, ArgumentError, Entry, _entry_or_include, is_option_name,
-                                read_options_file)
+                                petsc_arguments, read_options_file)
 
 USAGE = ("usage: mpirun -n N python -m pfault SCENE.opts [-option value ...]   (python -m pfault -help lists the "
          "options and exit codes)")
@@ -120,7 +121,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.code
     rest = ["-help" if a in ("--help", "-h") else a for a in rest]
     import petsc4py
-    petsc4py.init([argv[0], "-options_file", scene] + rest)
+    petsc4py.init([argv[0]] + petsc_arguments(scene, rest))
     try:
         from petsc4py import PETSc  # noqa: F401  (PetscInitialize reads the options here)
     except Exception as exc:  # noqa: BLE001

@@ -58,9 +58,8 @@ def main(options_file: str, argv: list[str]) -> int:
         if PETSc.Options().hasName("help"):
             PETSc.Sys.Print(help_text())
         sim = Simulation(options_file, argv)
-        sim.setup()
         summary = sim.run()
-        run_on_root(comm, sim.write_summary, time.perf_counter() - t0)
+        run_on_root(comm, sim.write_summary, summary, time.perf_counter() - t0)
     except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001  (every failure ends the run through the guard)
         err = as_pfault_error(_flow_failure(exc) if isinstance(exc, FlowNotConverged) else exc)
         code = guard.settle(err, last_words=lambda line, code: _last_words(sim, line, code))

@@ -226,9 +226,9 @@ def _apply_solver(scene: Scene, mesh: Any, options_file: str) -> str | None:
     """Apply the solver options file of -pfault_solver (pfault.solver.choice: ``auto`` takes the direct solver below
     a size, the iterative one above) where the scene and the command line are silent; returns its path."""
     from .solver.setup import apply_solver_file
-    v = mesh.dm.createGlobalVec()
-    n_dofs = v.getSize()
-    v.destroy()
+    # the unknowns this rank owns: the global section's (DMPlex caches it; the state's Vec is laid out from it)
+    owned = mesh.dm.getGlobalSection().getConstrainedStorageSize()
+    n_dofs = int(mesh.dm.getComm().tompi4py().allreduce(owned))
     name = solver_file_name(scene.solver_name or "", n_dofs, scene.fault_settings,
                             pc_type_given=PETSc.Options().hasName("pc_type"))
     if scene.solver_name == AUTO and name:

@@ -1,7 +1,13 @@
 """PETSc options files read as PETSc reads them, strictly: a binary or malformed file, two options on a line,
 a missing or looping nested ``-options_file`` is an ArgumentError naming the file and line (exit code 1).
 Used before PETSc starts (pfault.__main__: the scene and its includes) and for solver files
-(pfault.solver.setup)."""
+(pfault.solver.setup).
+
+One difference from PETSc: a file included from another (``-options_file`` inside a file) is found relative
+to the directory of the file that includes it, so that a scene runs from any directory; an absolute path is
+used as it is, and ``-options_file`` on the command line is relative to the working directory. PETSc itself
+would look in the working directory, so pfault hands PETSc the files' options expanded (``petsc_arguments``)
+rather than the files."""
 
 from __future__ import annotations
 
@@ -47,8 +53,8 @@ def _name(token):
 
 def read_options_file(path: str, included_by: tuple[str, ...] = ()) -> list[Entry]:
     """Entries of a PETSc options file, nested -options_file expanded in place (paths relative to the
-    working directory, as PETSc reads them). Raises ArgumentError (exit 1) for what PETSc would reject."""
-    if path in included_by:
+    including file's directory). Raises ArgumentError (exit 1) for what PETSc would reject."""
+    if os.path.realpath(path) in {os.path.realpath(p) for p in included_by}:
         raise ArgumentError(f"{included_by[-1]}: -options_file {path} is already being read (the files "
                             "include each other); remove the loop", EXIT_INPUT)
     try:
@@ -91,7 +97,47 @@ def _entry_or_include(token, value, source, line, included_by):
     where = f"{source} line {line}" if line else "on the command line"
     if value is None:
         raise ArgumentError(f"{where}: -options_file needs a file name", EXIT_INPUT)
-    if not os.path.isfile(value):
-        raise ArgumentError(f"{where}: -options_file {value}: no such file (paths are relative to the "
-                            f"directory pfault runs in, {os.getcwd()})", EXIT_INPUT)
-    return read_options_file(value, included_by + ((source,) if line else ()))
+    path = included_path(value, source if line else None)
+    if not os.path.isfile(path):
+        raise ArgumentError(f"{where}: -options_file {value}: no such file{_where_looked(value, source, line)}",
+                            EXIT_INPUT)
+    return read_options_file(path, included_by + ((source,) if line else ()))
+
+
+def included_path(value: str, including: str | None) -> str:
+    """Where ``-options_file value`` is: relative to the directory of the file ``including`` it, or to the
+    working directory on the command line (``including`` None); an absolute path as it is."""
+    if including is None or os.path.isabs(value):
+        return value
+    return os.path.normpath(os.path.join(os.path.dirname(including), value))
+
+
+def _where_looked(value, source, line):
+    if not line:
+        return f" (paths on the command line are relative to the directory pfault runs in, {os.getcwd()})"
+    base = os.path.dirname(source) or "."
+    hint = ""
+    if not os.path.isabs(value) and os.path.isfile(value):
+        hint = f"; {value} of the working directory is {os.path.relpath(os.path.abspath(value), base)} from there"
+    return f" (an included file is found relative to the file that includes it, in {base}{hint})"
+
+
+def petsc_arguments(scene: str, rest: list[str]) -> list[str]:
+    """The options of the scene file and then the command line ``rest``, as arguments for petsc4py.init, the
+    options files (the scene, those it includes, ``-options_file`` on the command line) expanded in place: the
+    later of two values wins, as when PETSc reads the files. Raises ArgumentError as read_options_file does."""
+    args = _flatten(read_options_file(scene))
+    i = 0
+    while i < len(rest):
+        token = rest[i]
+        value = rest[i + 1] if i + 1 < len(rest) and not is_option_name(rest[i + 1]) else None
+        if is_option_name(token) and _name(token) == "options_file":
+            args += _flatten(_entry_or_include(token, value, COMMAND_LINE, 0, ()))
+        else:
+            args += [token] + ([] if value is None else [value])
+        i += 1 if value is None else 2
+    return args
+
+
+def _flatten(entries):
+    return [a for e in entries for a in ([f"-{e.name}"] if e.value is None else [f"-{e.name}", e.value])]

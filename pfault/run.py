@@ -17,6 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .effects import logged
+from .faults.contact import OPEN, SLIP, STICK
 from .interrupt import StopRequest
 
 
@@ -52,13 +53,30 @@ def surface_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
     return mpi.allreduce(sub, op=MPI.MAX), mpi.allreduce(hor, op=MPI.MAX)
 
 
-def fault_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
-    """Largest opening and slip of the fault faces (relative to the initial state)."""
-    g, gl = model.faults.faces.jumps(u_rel)
-    op = float(np.max(gl[:, 0], initial=0.0))
-    sl = float(np.max(np.linalg.norm(gl[:, 1:], axis=1), initial=0.0))
+def fault_figures(model: Any, states: np.ndarray, slid: np.ndarray, u_rel: np.ndarray) -> dict:
+    """Per fault (by name): how many faces are stuck, slipping and open (``states``: each owned face's, as
+    reported), the largest opening of its open faces and the largest slip of its faces that have slid
+    (``slid``: slipping or open at the end of a completed step, now or before), 0 where there are none; and
+    the largest of these over the faults. The jumps are relative to the initial state; a closed face's opening
+    and a stuck face's slip are not the fault's (they are the discretisation's) and are not reported here
+    (fault.h5 has every face's jump)."""
+    faces = model.faults.faces
+    names = [f.name for f in model.scene.fault_settings]
+    gl = faces.jumps(u_rel)[1]
+    opening = np.where(states == OPEN, gl[:, 0], 0.0)
+    slip = np.where(slid, np.linalg.norm(gl[:, 1:], axis=1), 0.0)
+    counts = np.zeros((len(names), 3), dtype=np.int64)
+    np.add.at(counts, (faces.fault, states), 1)
+    largest = np.zeros((len(names), 2))
+    np.maximum.at(largest, faces.fault, np.column_stack([opening, slip]))
     mpi = model.comm.tompi4py()
-    return mpi.allreduce(op, op=MPI.MAX), mpi.allreduce(sl, op=MPI.MAX)
+    mpi.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
+    mpi.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
+    per = {name: {"faces_stuck": int(c[STICK]), "faces_slipping": int(c[SLIP]), "faces_open": int(c[OPEN]),
+                  "max_opening_m": float(m[0]), "max_slip_m": float(m[1])}
+           for name, c, m in zip(names, counts, largest)}
+    return {"max_fault_opening_m": float(largest[:, 0].max(initial=0.0)),
+            "max_fault_slip_m": float(largest[:, 1].max(initial=0.0)), "faults": per}
 
 
 def relative_displacement(model: Any, state: Any) -> np.ndarray:
@@ -84,7 +102,9 @@ def initial_state(model: Any, state: Any, solver: Any, wall: dict) -> list[dict]
     rec = {"time_s": 0.0, "newton_its": 0, "ksp_its": 0, "wall_s": time.perf_counter() - t0,
            "converged": True, "initial": True, "step": 0}
     if model.faults is not None:
-        rec.update(model.faults.counts_by_state(model.equations.local_array(state.u)))
+        loc = model.equations.local_array(state.u)
+        rec.update(model.faults.counts_by_state(loc))
+        rec.update(fault_figures(model, model.faults.states(loc), state.fault_slid, np.zeros_like(loc)))
     stage.pop()
     wall["solve"] += rec["wall_s"]
     return [rec]
@@ -114,7 +134,10 @@ def time_loop(model: Any, state: Any, solver: Any, observers: list, times: np.nd
             u_rel = relative_displacement(model, state)
             rec["max_subsidence_m"], rec["max_horizontal_displacement_m"] = surface_figures(model, u_rel)
             if model.faults is not None:
-                rec["max_fault_opening_m"], rec["max_fault_slip_m"] = fault_figures(model, u_rel)
+                states = model.faults.states(model.equations.local_array(state.u))
+                if rec["converged"]:
+                    state.fault_slid |= states != STICK
+                rec.update(fault_figures(model, states, state.fault_slid, u_rel))
             records.append(rec)
             stop = request.agreed()
             due = index % s.output_every == 0 or index == len(times) - 1 or not rec["converged"] or stop is not None

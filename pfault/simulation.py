@@ -3,7 +3,6 @@ and by tests."""
 
 from __future__ import annotations
 
-import sys
 import time
 from typing import Any
 
@@ -14,6 +13,7 @@ from . import run as loop
 from .effects import EffectCosts
 from .errors import InputError
 from .io.observations import Observations, read_observation_settings
+from .io.summary import RunSummary
 from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLine, RunOutput, SummaryObserver,
                            format_time, progress_line)
 from .model import Model, build_model
@@ -23,68 +23,80 @@ from .state import State
 
 
 class Simulation:
-    """One run of the scene in ``options_file``: ``setup()`` builds the model, the state and the solver;
-    ``run()`` the time loop; ``write_summary`` the final summary.json and figures. The observers of every step
-    are those ``observers`` returns."""
+    """One run of the scene in ``options_file``, built in one step: the model, the state, the solver, the run's
+    output (opened after the first solve) and its summary; on a restart the state is the checkpoint's. ``run()``
+    the time loop; ``write_summary`` the final summary.json and figures. The observers of every step are those
+    ``observers`` returns."""
 
     def __init__(self, options_file: str = "", argv: list | tuple = ()) -> None:
-        self.options_file = options_file
         self.argv = list(argv)
         self.comm = PETSc.COMM_WORLD
         self.reader = OptionReader(PETSc)
-        self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "output": 0.0}
-        self.summary: dict | None = None
-        self.model: Model | None = None
-        self.state: State | None = None
-        self.solver: StepSolver | None = None
-        self.output: RunOutput | None = None
-        self.restart_step: int | None = None
-        self.observations: Observations | None = None
+        self.costs = EffectCosts(self.comm)
+        observed = read_observation_settings(self.reader, options_file)    # before build_model checks the options
+        self.model: Model = build_model(self.comm, self.reader, options_file)
+        self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "output": 0.0, **self.model.wall}
+        self.times = np.linspace(0.0, self.settings.time_end, self.settings.time_steps + 1)
+        state = solver = None
+        try:
+            self.observations = Observations.locate(self.model, observed)
+            state, solver = self._state_and_solver(self.model)
+            # the records, grid index and step offset of the run a restart continues (None: a new run)
+            self.resumed = self._restart(state) if self.model.scene.restart_dir else None
+        except BaseException:
+            # every rank at once (the errors here are every rank's), as pfault.model.build_model does
+            for part in (solver, state, self.model):
+                if part is not None:
+                    part.destroy()
+            raise
+        self.state: State = state
+        self.solver: StepSolver = solver
+        restart_step = None if self.resumed is None else self.resumed[1] + self.resumed[2]
+        self.output = RunOutput(self.model, state, self.argv, self.model.scene.restart_dir, restart_step)
+        self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
 
     @property
     def settings(self) -> Any:
         return self.model.settings
 
-    def setup(self) -> None:
-        self.costs = EffectCosts(self.comm)
-        observed = read_observation_settings(self.reader, self.options_file)      # before build_model checks the -pfault_ options
-        self.model = m = build_model(self.comm, self.reader, self.options_file)
-        self.observations = Observations.locate(m, observed)
-        self.wall.update(m.wall)
+    def _state_and_solver(self, m: Model) -> tuple[State, StepSolver]:
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Setup")
         stage.push()
-        self.state = State(m.equations.create_vec(), m.faults, m.source)
+        state = State(m.equations.create_vec(), m.faults, m.source)
         contact = m.scene.contact
-        self.solver = StepSolver(m.equations, self.state, geostatic=m.settings.geostatic,
-                                 monitor=bool(contact is not None and contact.monitor))
+        try:
+            solver = StepSolver(m.equations, state, geostatic=m.settings.geostatic,
+                                monitor=bool(contact is not None and contact.monitor))
+        except BaseException:
+            state.destroy()
+            raise
         stage.pop()
         self.wall["setup"] += time.perf_counter() - t0
+        return state, solver
 
     # ------------------------------------------------------------------------------------------
     def run(self) -> dict:
-        m, s = self.model, self.model.settings
-        times = np.linspace(0.0, s.time_end, s.time_steps + 1)
-        if m.scene.restart_dir:
-            records, first, offset = self._restart(times)
+        """The time loop from the initial state, or from the checkpoint of a restart; returns the summary."""
+        m = self.model
+        if self.resumed is not None:
+            records, first, offset = self.resumed
         else:
             records, first, offset = loop.initial_state(m, self.state, self.solver, self.wall), 0, 0
             for rec in records:
                 PETSc.Sys.Print(progress_line(0, rec))
         self.costs.mark_setup()
-        self.output = RunOutput(m, self.state, self.argv, m.scene.restart_dir, self.restart_step)
-        converged, stop = loop.time_loop(m, self.state, self.solver, self.observers(self.output, records), times,
-                                         first, offset, records, self.wall, self._open_output)
+        converged, stop = loop.time_loop(m, self.state, self.solver, self.observers(self.output, records),
+                                         self.times, first, offset, records, self.wall, self._open_output)
         self.output.close()
-        self.summary = self._summary(records, converged, stop)
-        return self.summary
+        return self.composer.compose(records, converged, stop)
 
     def observers(self, output: RunOutput, records: list) -> list[Observer]:
         """The observers of every step, in the order they see it: the progress line, the fields, the stations and
         the LOS raster (pfault.io.observations), the checkpoint and the summary (``records``: the run's step
         records, which the last two write)."""
         return [ProgressLine(), FieldOutput(output), *self.observations.observers(output),
-                CheckpointObserver(output, self.state, records), SummaryObserver(output, self._summary, records)]
+                CheckpointObserver(output, self.state, records), SummaryObserver(output, self.composer, records)]
 
     def _open_output(self) -> None:
         """After the first solve (every solver option has been read by then): reject unused options, then open
@@ -99,12 +111,13 @@ class Simulation:
         stage.pop()
         self.wall["output"] += time.perf_counter() - t0
 
-    def _restart(self, times: np.ndarray) -> tuple[list, int, int]:
-        """State, step records and place on the time grid of the run in -pfault_restart: returns (records,
-        grid index of the checkpoint's time, step number minus grid index)."""
+    def _restart(self, state: State) -> tuple[list, int, int]:
+        """Restore ``state`` from the checkpoint of the run in -pfault_restart: returns its step records, the
+        grid index of its time and its step number minus that index."""
         from .io import checkpoint
+        times = self.times
         restart_dir = self.model.scene.restart_dir
-        attrs, records = checkpoint.load(self.comm, restart_dir, self.model, self.state)
+        attrs, records = checkpoint.load(self.comm, restart_dir, self.model, state)
         step, t = int(attrs["step"]), float(attrs["time_s"])
         index = int(np.argmin(np.abs(times - t)))
         if abs(times[index] - t) > 1e-9 * times[-1]:
@@ -114,93 +127,34 @@ class Simulation:
         if index == len(times) - 1:
             raise InputError(f"-pfault_restart {restart_dir}: the run is complete at t = {t:g} s; give a "
                              "later -pfault_time_end to continue it")
-        self.restart_step = step
         PETSc.Sys.Print(f"pfault: continuing {restart_dir} after step {step} (t = {format_time(t).strip()})")
         return records, index, step - index     # the checkpoint's records end at its step
 
     # ------------------------------------------------------------------------------------------
-    def _summary(self, steps: list, converged: bool, stop: str | None, running: bool = False) -> dict:
-        m = self.model
-        last = [r for r in steps if "max_subsidence_m" in r]
-        summary = {
-            "scene": m.settings.scene,
-            "ranks": self.comm.size,
-            "mesh": {"nodes": int(m.mesh.n_global_vertices), "cells": int(m.mesh.n_global_cells),
-                     "fault_faces": int(len(m.fault_id)) if m.faults is not None else 0},
-            "fields": list(m.dofmap.fields),
-            "dofs": int(self.state.u.getSize()),
-            "solver": self._solver_record(steps),
-            "steps": steps,
-            "max_subsidence_m": max([r["max_subsidence_m"] for r in last], default=0.0),
-            "max_horizontal_displacement_m": max([r["max_horizontal_displacement_m"] for r in last], default=0.0),
-            "final_subsidence_m": last[-1]["max_subsidence_m"] if last else 0.0,
-            "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
-            "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
-            "memory_peak_mib": self._memory_peak_mib(),
-            "converged": bool(converged),
-            "effects": self.costs.record(m.scene.effects, len([r for r in steps if not r.get("initial")])),
-            # a run in progress, or one killed before it could say how it ended, reads running: true
-            "running": bool(running),
-            "interrupted": stop is not None,
-            "completed_steps": [r["step"] for r in last if r["converged"]],
-        }
-        from .io.hazard import summary_maxima
-        summary.update(summary_maxima(last, m.settings.hazard_strain_threshold))
-        if stop is not None:
-            summary["stop_signal"] = stop
-        if m.scene.restart_dir:
-            summary["restart"] = {"from": m.scene.restart_dir, "step": self.restart_step}
-        return summary
-
-    def _solver_record(self, steps: list) -> dict:
-        """The linear solver and its iterations: Krylov iterations per Newton iteration over the run (each
-        step's own is in its record, ``ksp_per_newton``)."""
-        ksp_type, pc_type = self.solver.ksp_types()
-        newton = sum(r.get("newton_its", 0) for r in steps)
-        krylov = sum(r.get("ksp_its", 0) for r in steps)
-        return {"file": self.model.solver_file, "ksp_type": ksp_type, "pc_type": pc_type,
-                "newton_its": int(newton), "ksp_its": int(krylov),
-                "ksp_per_newton": krylov / newton if newton else 0.0,
-                "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
-
-    def _memory_peak_mib(self) -> list:
-        """The largest resident set size of each rank's process so far, in MiB (a list in rank order; collective)."""
-        import resource
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux, bytes on macOS
-        mib = peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
-        return [round(m, 1) for m in self.comm.tompi4py().allgather(mib)]
-
-    # ------------------------------------------------------------------------------------------
-    def write_summary(self, total: float) -> None:
+    def write_summary(self, summary: dict, total: float) -> None:
         """The final summary.json, then the figures. Rank 0 only, under ``run_on_root`` (pfault.cli): the other
         ranks wait for its verdict, so that none ends (with a non-zero exit code that makes mpirun kill the
         others) while files are written, and a failure to write ends them all."""
         self.wall["total"] = total
         self.wall["assembly"] = self.model.equations.assembly_wall
-        self.summary["wall_s"] = dict(self.wall)
+        summary["wall_s"] = dict(self.wall)
         if self.comm.rank == 0:
-            self.output.finish(self.summary, self.model.scene.figures)
+            self.output.finish(summary, self.model.scene.figures)
 
     def record_failure(self, line: str, code: int) -> None:
         """Rank 0, after every rank failed together (RunOutput.record_failure)."""
-        if self.output is not None:
-            self.output.record_failure(line, code)
+        self.output.record_failure(line, code)
 
     def last_words(self, line: str, code: int) -> None:
         """This rank failed alone and aborts the MPI job next (RunOutput.last_words)."""
-        if self.output is not None:
-            self.output.last_words(line, code)
+        self.output.last_words(line, code)
 
     def destroy(self) -> None:
         """Collective: every rank destroys the run at once."""
-        if self.output is not None:
-            self.output.destroy()
-        if self.solver is not None:
-            self.solver.destroy()
-        if self.state is not None:
-            self.state.destroy()
-        if self.model is not None:
-            self.model.destroy()
+        self.output.destroy()
+        self.solver.destroy()
+        self.state.destroy()
+        self.model.destroy()
 
 
 __all__ = ["Simulation", "Observer"]

@@ -3,8 +3,8 @@
 The model (pfault.model) is built once and does not change during the run. What does is held here: the
 solution (displacements and fault multipliers), the initial state it is measured from, the state converged
 before it (the predictor's history), the time, the geostatic initial stress, and the histories of the parts
-that have one (each fault face's initial traction, pore pressure and start of step: ``faults``; the flow
-model's head: the pore-pressure source's ``checkpoint()``). The checkpoint (pfault.io.checkpoint) writes it and
+that have one (each fault face's initial traction, pore pressure and start of step: ``faults``; whether each
+fault face has slid: ``fault_slid``; the flow model's head: the pore-pressure source's ``checkpoint()``). The checkpoint (pfault.io.checkpoint) writes it and
 a restart reads it; the time loop hands it to the observers read-only.
 """
 
@@ -18,8 +18,10 @@ import numpy as np
 class State:
     """``u`` (the solution at ``time``), ``u_ref`` (the state at t = 0, after a geostatic initial state), the
     state converged before ``u`` (``previous``: (time, Vec) or None), ``sigma0`` (cells x 3 x 3, Pa, or None),
-    and ``faults`` (the fault interface whose per-face history it carries, or None) and ``source`` (the
-    pore-pressure source, whose state a flow model carries)."""
+    ``faults`` (the fault interface whose per-face history it carries, or None), ``fault_slid`` (per owned fault
+    face: slipping or open at the end of a completed step, now or before; its tangential jump is then the
+    fault's slip, pfault.run.fault_figures) and ``source`` (the pore-pressure source, whose state a flow model
+    carries)."""
 
     def __init__(self, u: Any, faults: Any = None, source: Any = None) -> None:
         self.u = u
@@ -29,6 +31,7 @@ class State:
         self.time = 0.0
         self.sigma0: np.ndarray | None = None
         self.faults = faults
+        self.fault_slid = np.zeros(0 if faults is None else faults.faces.nf, dtype=bool)
         self.source = source
 
     def set_previous(self, t: float, u: Any) -> None:

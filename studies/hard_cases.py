@@ -486,12 +486,12 @@ def _faces_per_rank_main(argv):
     {"faces_per_rank": [...]} (a face belongs to the rank owning its minus cell)."""
     scene, rest = argv[0], list(argv[1:])
     import petsc4py
-    petsc4py.init([sys.argv[0], "-options_file", scene] + rest)
+    from pfault.optionsfile import petsc_arguments
+    petsc4py.init([sys.argv[0]] + petsc_arguments(scene, rest))
     from petsc4py import PETSc
     from pfault.simulation import Simulation
     sim = Simulation(scene, [scene] + rest)
     try:
-        sim.setup()
         faces = sim.model.faults.faces
         counts = [int(c) for c in faces.mpi.allgather(faces.nf)]
     finally:

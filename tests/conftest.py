@@ -26,6 +26,40 @@ QUERETARO = "config/queretaro.opts"
 WUXI = "config/wuxi.opts"
 TIMEOUT = 600
 
+# a 2x2x2-cell box drained by one well, no fault (written by the flow_box fixture; the tests give its time grid)
+FLOW_BOX = """# a 2x2x2-cell box drained by one well, no fault
+-pfault_box_size 10,10,20
+-pfault_box_cells 2,2,2
+-pfault_material_soil_young_modulus 10*MPa
+-pfault_material_soil_poisson_ratio 0.25
+-pfault_material_soil_hydraulic_conductivity 1*m/day
+-pfault_bc_xmin_type roller
+-pfault_bc_xmax_type roller
+-pfault_bc_ymin_type roller
+-pfault_bc_ymax_type roller
+-pfault_bc_bottom_type fixed
+-pfault_flow true
+-pfault_flow_wells 5,5
+-pfault_flow_well_screen -1,-15
+-pfault_flow_well_rate 0:0,1*day:3*L/s
+-pfault_flow_fixed_head_surfaces xmin
+-pfault_solver mumps
+"""
+
+
+def write_flow_box(directory):
+    """The flow box's options file in ``directory``; returns its path."""
+    path = os.path.join(str(directory), "flow_box.opts")
+    with open(path, "w") as fh:
+        fh.write(FLOW_BOX)
+    return path
+
+
+@pytest.fixture
+def flow_box(tmp_path):
+    """Path of the flow box's options file (FLOW_BOX), in the test's tmp_path."""
+    return write_flow_box(tmp_path)
+
 
 def mpi_env():
     return study_mpi_env(oversubscribe=True)

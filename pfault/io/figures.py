@@ -6,8 +6,9 @@ A run writes them at its end (``-pfault_figures``, default true; pfault.simulati
 
 writes them into any RUN_DIR (an interrupted run's too):
 
-- ``fault_opening_slip.png`` (faults only): opening and slip magnitude over the fault plane, one colour per
-  fault triangle, in fault-plane coordinates ((y, z) for a vertical fault x = const; the vertical axis is
+- ``fault_opening_slip.png`` (faults only): the opening of the open faces and the slip magnitude of the faces
+  that have slid (zero elsewhere; the titles count the faces stuck, slipping and open) over the fault plane,
+  one colour per fault triangle, in fault-plane coordinates ((y, z) for a vertical fault x = const; the vertical axis is
   stretched), and along-strike profiles of the largest opening and slip and of the mean dip slip (like
   Figs 3 and 6 of Franceschini et al., Proc. IAHS 372, 2015);
 - ``subsidence_map.png``: land subsidence -u_z on the top surface (filled contours on the surface
@@ -112,7 +113,8 @@ def read_fields(run_dir: str, step: int = -1) -> Snapshot:
 def read_fault(run_dir: str, step: int = -1) -> Snapshot:
     """Fault triangles (on the serial points, i.e. the minus-side vertices) and per-face fields at one time:
     ``opening`` (m), ``slip`` (m, 3 components), ``slip_magnitude`` (m), ``traction_normal`` (Pa),
-    ``traction_shear`` (Pa), ``state`` (stick/slip/open code), ``fault`` (fault index)."""
+    ``traction_shear`` (Pa), ``state`` (stick/slip/open code), ``slid`` (1: slipping or open at the end of a
+    completed step, now or before), ``fault`` (fault index)."""
     return _read_series(os.path.join(run_dir, "fault.xdmf"), step, "triangle")
 
 
@@ -259,23 +261,28 @@ def fault_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     normals, _, centroids = face_geometry(pts, tris)
     axis, (ia, ib) = plane_axes(normals)
     names = "xyz"
-    opening_cm = 100.0 * cd["opening"]
-    slip_cm = 100.0 * cd["slip_magnitude"]
-    dip_cm = 100.0 * dip_slip(cd["slip"], normals)
+    # the opening of open faces and the slip of faces that have slid; a closed face's jump is the discretisation's
+    state = cd["state"]
+    slid = cd["slid"] != 0 if "slid" in cd else state != 0     # (a run written before the flag)
+    opening_cm = 100.0 * np.where(state == 2, cd["opening"], 0.0)
+    slip_cm = 100.0 * np.where(slid, cd["slip_magnitude"], 0.0)
+    dip_cm = 100.0 * np.where(slid, dip_slip(cd["slip"], normals), 0.0)
+    counts = np.bincount(state, minlength=3)
+    faces = f"{counts[0]} stuck, {counts[1]} slipping, {counts[2]} open"
     tri = Triangulation(pts[:, ia], pts[:, ib], tris)
     scene = _scene(run_dir)
     plane = float(np.median(centroids[:, axis]))
 
     fig, axs = plt.subplots(3, 1, figsize=(11, 9.5), constrained_layout=True,
                             gridspec_kw={"height_ratios": [1, 1, 1.1]})
-    panels = ((opening_cm, "viridis", "opening (cm)", "fault opening (normal jump, positive: open)"),
-              (slip_cm, "magma", "slip (cm)", "fault slip magnitude (tangential jump)"))
+    panels = ((opening_cm, "viridis", "opening (cm)", "opening of the open faces"),
+              (slip_cm, "magma", "slip (cm)", "slip of the faces that have slid"))
     for ax, (val, cmap, label, what) in zip(axs[:2], panels):
         vmax = max(float(np.max(val, initial=0.0)), 1e-6)
         pc = ax.tripcolor(tri, facecolors=val, cmap=cmap, vmin=0.0, vmax=vmax, edgecolors="none")
         cb = fig.colorbar(pc, ax=ax, pad=0.01)
         cb.set_label(label)
-        ax.set_title(f"{scene}: {what}, max {vmax:.3g} cm, {_title_time(snap.time)}")
+        ax.set_title(f"{scene}: {what}, max {vmax:.3g} cm ({faces}), {_title_time(snap.time)}")
         ax.set_xlabel(f"{names[ia]} (m), along the fault plane {names[axis]} = {plane:g} m")
         ax.set_ylabel(f"{names[ib]} (m, stretched)")
         ax.set_xlim(pts[tris, ia].min(), pts[tris, ia].max())
@@ -483,8 +490,8 @@ def histories_figure(run_dir: str, out: str | None = None) -> str:
 
     panels = [("max_subsidence_m", "max land subsidence", "m", 1.0)]
     if any("max_fault_opening_m" in r for r in steps):
-        panels += [("max_fault_opening_m", "max fault opening", "cm", 100.0),
-                   ("max_fault_slip_m", "max fault slip", "cm", 100.0)]
+        panels += [("max_fault_opening_m", "max fault opening (open faces)", "cm", 100.0),
+                   ("max_fault_slip_m", "max fault slip (faces that have slid)", "cm", 100.0)]
     if any("max_drawdown_m" in r for r in steps):
         panels.append(("max_drawdown_m", "max drawdown", "m of head", 1.0))
     n = len(panels) + 1

@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import errno
 import shutil
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from petsc4py import PETSc
 
 from ..effects import logged
 from ..errors import EXIT_NOT_CONVERGED, InputError, OutputError, run_on_root
+from .summary import RunSummary
 
 
 def format_time(t: float) -> str:
@@ -25,11 +26,15 @@ def format_time(t: float) -> str:
 
 
 def progress_line(step: int, rec: dict) -> str:
-    """One line per step: time, Newton and Krylov iterations, factorisations, wall time, the faces' states, the
-    largest subsidence, opening and slip, and why a step failed."""
+    """One line per step: time, Newton and Krylov iterations, factorisations, wall time, the faces' states (and
+    each fault's, when there are several), the largest subsidence, the largest opening of an open face and slip
+    of a face that has slid (pfault.run.fault_figures), and why a step failed."""
     extra = ""
     if "stick" in rec:
         extra += f"  stick/slip/open {rec['stick']}/{rec['slip']}/{rec['open']}"
+        if len(rec.get("faults", ())) > 1:
+            extra += " (" + ", ".join(f"{name} {f['faces_stuck']}/{f['faces_slipping']}/{f['faces_open']}"
+                                      for name, f in rec["faults"].items()) + ")"
     if "max_subsidence_m" in rec:
         extra += f"  subsidence {rec['max_subsidence_m']:.4g} m"
     if "max_fault_opening_m" in rec:
@@ -164,7 +169,11 @@ class RunOutput:
         u_total = eq.local_array(state.u_ref if initial else state.u)
         dp = eq.loads.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
         sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
-        faults = _fault_fields(m.faults, u_total, u_rel) if m.faults is not None else None
+        faults = None
+        if m.faults is not None:
+            # the initial state: no face has slid yet, whenever it is written
+            slid = np.zeros_like(state.fault_slid) if initial else state.fault_slid
+            faults = _fault_fields(m.faults, u_total, u_rel, slid)
         head = m.source.vertex_head()
         return LocalStep(both, head, {"pore_pressure_change": dp, "stress": sig}, faults)
 
@@ -240,13 +249,16 @@ class RunOutput:
             self.writer.abandon()         # nothing happens to a run directory already in place
 
 
-def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray) -> dict:
-    """Per fault face this rank owns: tractions from the total state, jumps relative to the initial state."""
+def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray, slid: np.ndarray) -> dict:
+    """Per fault face this rank owns: tractions from the total state, jumps relative to the initial state (every
+    face's, as computed), its state (stick 0, slip 1, open 2) and whether it has slid (slipping or open at the
+    end of a completed step, now or before: its slip is in the reported maxima)."""
     t_loc, _, t_glob, _, state = fs.face_fields(u_total)
     g, gl = fs.faces.jumps(u_rel)
     return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.faces.normal,
             "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.faces.normal,
             "slip_magnitude": np.linalg.norm(gl[:, 1:], axis=1), "state": np.asarray(state, dtype=np.int64),
+            "slid": np.asarray(slid, dtype=np.int64),
             "traction_normal_effective": fs.effective(t_loc)[:, 0]}
 
 
@@ -282,8 +294,9 @@ class SummaryObserver(Observer):
     """summary.json after every step (``running``: true until the run ends); the first completed step puts the
     run's directory in place."""
 
-    def __init__(self, output: RunOutput, compose: Callable[..., dict], records: list) -> None:
-        self.output, self.compose, self.records = output, compose, records
+    def __init__(self, output: RunOutput, summary: RunSummary, records: list) -> None:
+        self.output, self.summary, self.records = output, summary, records
 
     def step_done(self, result: Any) -> None:
-        self.output.write_summary(self.compose(self.records, result.record["converged"], None, running=True))
+        self.output.write_summary(self.summary.compose(self.records, result.record["converged"], None,
+                                                       running=True))

@@ -201,8 +201,6 @@ class StepSolver:
         displacements are those caused by the drawdown, and stresses and fault tractions are the initial ones
         plus the changes; the faults' tractions start from it."""
         eq, state, faults = self.eq, self.state, self.faults
-        if faults is not None:
-            faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
         eq.loads.gravity(eq.loads.f)
         ug = state.u.duplicate()
         ksp = self.snes.getKSP()
@@ -222,6 +220,7 @@ class StepSolver:
         ug.destroy()
         state.u.set(0.0)
         if faults is not None:
+            # set once (the glued operator and the gravity load do not depend on it), before the laws start
             faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
             faults.t0 = faults.initial_tractions(state.sigma0)
             loc = eq.local_array(state.u)

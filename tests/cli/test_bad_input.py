@@ -17,32 +17,13 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from conftest import OEDOMETER, PY, REPO, TWO_BLOCKS, mpi_env
+from conftest import FLOW_BOX, OEDOMETER, PY, REPO, TWO_BLOCKS, mpi_env
 
 OED = OEDOMETER
+OED_FILE = os.path.join(REPO, OEDOMETER)      # included from files in tmp (an include is relative to its file)
 TIMEOUT = 60
 FREE_SIDES = ["-pfault_bc_xmin_type", "free", "-pfault_bc_xmax_type", "free", "-pfault_bc_ymin_type", "free",
               "-pfault_bc_ymax_type", "free"]
-FLOW_SCENE = """# a 2x2x2-cell box drained by one well
--pfault_box_size 10,10,20
--pfault_box_cells 2,2,2
--pfault_material_soil_young_modulus 10*MPa
--pfault_material_soil_poisson_ratio 0.25
--pfault_material_soil_hydraulic_conductivity 1*m/day
--pfault_bc_xmin_type roller
--pfault_bc_xmax_type roller
--pfault_bc_ymin_type roller
--pfault_bc_ymax_type roller
--pfault_bc_bottom_type fixed
--pfault_flow true
--pfault_flow_wells 5,5
--pfault_flow_well_screen -1,-15
--pfault_flow_well_rate 0:0,1*day:3*L/s
--pfault_flow_fixed_head_surfaces xmin
--pfault_time_end 1*day
--pfault_time_steps 2
--pfault_solver mumps
-"""
 
 
 def run_pfault(args, ranks, timeout=TIMEOUT):
@@ -108,7 +89,7 @@ def field_scene(prop, text, suffix=""):
 
 def include_loop(tmp, out, ranks):
     """a.opts includes b.opts, which includes a.opts again."""
-    write(tmp / "b.opts", f"-options_file {OED}\n-options_file {tmp / 'a.opts'}\n")
+    write(tmp / "b.opts", f"-options_file {OED_FILE}\n-options_file {tmp / 'a.opts'}\n")
     return ["-m", "pfault", write(tmp / "a.opts", f"-options_file {tmp / 'b.opts'}\n"), "-pfault_output_dir", str(out)]
 
 
@@ -138,13 +119,13 @@ CASES = [
          "the scene file 'config/oedometer.opts' must come first"),
     # scene files: exit 1
     Case("binary_scene", scene_file(BINARY), 1, "scene.opts: not a text options file (binary content)"),
-    Case("line_without_option", scene_file(f"-options_file {OED}\nfoo bar\n"), 1,
+    Case("line_without_option", scene_file(f"-options_file {OED_FILE}\nfoo bar\n"), 1,
          "scene.opts line 2: 'foo' is not an option name"),
-    Case("two_options_on_a_line", scene_file(f"-options_file {OED}\n-pfault_time_steps 2 -pfault_time_end 3\n"),
+    Case("two_options_on_a_line", scene_file(f"-options_file {OED_FILE}\n-pfault_time_steps 2 -pfault_time_end 3\n"),
          1, "scene.opts line 2: two options on one line (-pfault_time_steps ... -pfault_time_end)"),
-    Case("two_values", scene_file(f"-options_file {OED}\n-pfault_box_size 10, 10, 100\n"), 1,
+    Case("two_values", scene_file(f"-options_file {OED_FILE}\n-pfault_box_size 10, 10, 100\n"), 1,
          "line 2: -pfault_box_size has more than one value ('10, 10, 100')"),
-    Case("missing_nested_file", scene_file(f"-options_file {OED}\n-options_file config/solver/none.opts\n"), 1,
+    Case("missing_nested_file", scene_file(f"-options_file {OED_FILE}\n-options_file config/solver/none.opts\n"), 1,
          "line 2: -options_file config/solver/none.opts: no such file"),
     Case("include_loop", include_loop, 1, "is already being read (the files include each other)"),
     Case("malformed_solver_file", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", str(out),
@@ -248,7 +229,8 @@ CASES = [
     Case("output_larger_than_disk", scene("-pfault_time_steps", "1000000000000", "-pfault_box_cells", "1,1,1"), 4,
          "the output needs about", "kept"),
     # a solve that fails: exit 3
-    Case("flow_not_converged", scene_file(FLOW_SCENE, "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
+    Case("flow_not_converged", scene_file(FLOW_BOX, "-pfault_time_end", "1*day", "-pfault_time_steps", "2",
+                                          "-flow_ksp_max_it", "1", "-flow_pc_type", "jacobi"), 3,
          "groundwater flow: KSP flow_ did not converge at t = 43200 s (reason -3)", "kept"),
     # the geostatic gravity solve fails: no initial stress from a wrong state (it opened the faults of the fault
     # scene at step 0 and its run went on)
@@ -385,7 +367,7 @@ def test_box_larger_than_memory(tmp_path):
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_duplicate_option_in_one_file_warns(tmp_path, ranks):
     """An option twice in the same file: one warning naming the value used; the run goes on."""
-    path = write(tmp_path / "scene.opts", f"-options_file {OED}\n-pfault_time_steps 2\n# later\n-pfault_time_steps 3\n")
+    path = write(tmp_path / "scene.opts", f"-options_file {OED_FILE}\n-pfault_time_steps 2\n# later\n-pfault_time_steps 3\n")
     code, stdout, stderr = run_pfault(["-m", "pfault", path, "-pfault_output_dir", str(tmp_path / "out")], ranks)
     assert code == 0, stderr
     warnings = [line for line in stderr.splitlines() if line.startswith("pfault: warning")]

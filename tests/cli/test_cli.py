@@ -88,3 +88,55 @@ def test_krylov_method_chosen_over_a_solver_file(tmp_path):
     assert summary["converged"]
     assert summary["solver"]["ksp_type"] == "cg"
     assert summary["solver"]["pc_type"] == "hypre"       # the displacement split's (no fault)
+
+
+def test_included_file_is_found_beside_the_including_file(tmp_path):
+    """A scene including another by a relative path runs from any directory: the include is found beside the
+    file that includes it (an absolute include as it is), and the later value wins as in PETSc."""
+    import subprocess
+    import sys
+    from conftest import REPO, mpi_env, read_summary
+    scenes, elsewhere = tmp_path / "scenes", tmp_path / "elsewhere"
+    scenes.mkdir()
+    elsewhere.mkdir()
+    (scenes / "base.opts").write_text(f"-options_file {os.path.join(REPO, OEDOMETER)}\n-pfault_time_steps 3\n")
+    (scenes / "variant.opts").write_text("-options_file base.opts\n-pfault_time_steps 2\n")
+    proc = subprocess.run([sys.executable, "-m", "pfault", os.path.join("..", "scenes", "variant.opts"),
+                           "-pfault_output_dir", "out", "-pfault_figures", "false"], cwd=elsewhere, env=mpi_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    summary = read_summary(elsewhere / "out")
+    assert [r["step"] for r in summary["steps"]] == [1, 2]
+    assert summary["scene"] == "oedometer"
+
+
+@pytest.mark.parametrize("variant, base_scene, own_scene", [("wuxi_recovery.opts", "wuxi", "wuxi_recovery"),
+                                                             ("queretaro_calibrated.opts", "queretaro",
+                                                              "queretaro_calibrated")])
+def test_shipped_variants_read_from_another_directory(tmp_path, monkeypatch, variant, base_scene, own_scene):
+    """config's variants include their base scene beside them: from another working directory their options
+    are the base's, then their own (the later -pfault_scene wins)."""
+    from conftest import REPO
+    from pfault.optionsfile import petsc_arguments
+    monkeypatch.chdir(tmp_path)
+    args = petsc_arguments(os.path.join(REPO, "config", variant), ["-pfault_time_steps", "1"])
+    scenes = [args[i + 1] for i, a in enumerate(args) if a == "-pfault_scene"]
+    assert scenes == [base_scene, own_scene]
+    assert args[-2:] == ["-pfault_time_steps", "1"]
+
+
+def test_missing_include_names_where_it_was_looked_for(tmp_path, monkeypatch):
+    """An include that is not beside its file but is in the working directory: the error says where it was
+    looked for and how to write it."""
+    from conftest import REPO
+    from pfault.optionsfile import ArgumentError, read_options_file
+    monkeypatch.chdir(REPO)
+    scene = tmp_path / "scene.opts"
+    scene.write_text(f"-options_file {OEDOMETER}\n")
+    with pytest.raises(ArgumentError) as err:
+        read_options_file(str(scene))
+    assert str(err.value) == (f"{scene} line 1: -options_file {OEDOMETER}: no such file (an included file is "
+                              f"found relative to the file that includes it, in {tmp_path}; {OEDOMETER} of the "
+                              f"working directory is {os.path.relpath(os.path.join(REPO, OEDOMETER), tmp_path)} "
+                              "from there)")
+    assert err.value.code == 1

@@ -28,46 +28,28 @@ import os
 import numpy as np
 import pytest
 
-from conftest import FISSURE_BOX, OEDOMETER, QUERETARO, WUXI, compare_runs, run_scene
+from conftest import (FISSURE_BOX, OEDOMETER, QUERETARO, TWO_BLOCKS, WUXI, compare_runs, run_scene,
+                      write_flow_box)
 
 RTOL = 1e-10
+FLOW_BOX_FILE = "flow_box.opts"     # conftest.FLOW_BOX, written by write_flow_box
 SCENES = {
     "oedometer": (OEDOMETER, (), "10", "5"),
     "queretaro": (QUERETARO, ("-pfault_mesh_size_factor", "6", "-flow_ksp_rtol", "1e-13", "-ksp_atol",
                                             "0"), "10*year", "5*year"),
     "wuxi": (WUXI, ("-pfault_mesh_size_factor", "4", "-ksp_atol", "0"), "2*year",
              "1*year"),   # slip and open faces
-    "flow": ("flow_box.opts", (), "2*day", "1*day"),
+    "flow": (FLOW_BOX_FILE, (), "2*day", "1*day"),
     "heads": ("config/site_example/site.opts", (), "10*year", "5*year"),    # MODFLOW heads, mesh origin
 }
-FLOW_BOX = """# a 2x2x2-cell box drained by one well, no fault
--pfault_box_size 10,10,20
--pfault_box_cells 2,2,2
--pfault_material_soil_young_modulus 10*MPa
--pfault_material_soil_poisson_ratio 0.25
--pfault_material_soil_hydraulic_conductivity 1*m/day
--pfault_bc_xmin_type roller
--pfault_bc_xmax_type roller
--pfault_bc_ymin_type roller
--pfault_bc_ymax_type roller
--pfault_bc_bottom_type fixed
--pfault_flow true
--pfault_flow_wells 5,5
--pfault_flow_well_screen -1,-15
--pfault_flow_well_rate 0:0,1*day:3*L/s
--pfault_flow_fixed_head_surfaces xmin
--pfault_solver mumps
-"""
 
 
 def scene_file(tmp_path, name):
     """Options file of SCENES[name] (the flow box is written into tmp_path)."""
     opts = SCENES[name][0]
-    if opts == "flow_box.opts":
-        path = tmp_path / opts
-        path.write_text(FLOW_BOX)
-        return str(path)
-    return opts
+    return write_flow_box(tmp_path) if opts == FLOW_BOX_FILE else opts
+
+
 def _steps(extra, n, end):
     return [*extra, "-pfault_time_steps", str(n), "-pfault_time_end", end]
 
@@ -133,6 +115,33 @@ def test_restart_rejects_a_time_grid_without_the_checkpoint(tmp_path):
     assert sorted(os.listdir(part)) == before and not os.path.exists(other)
 
 
+def test_restart_reads_a_format_4_checkpoint_without_faults_only(tmp_path):
+    """Format 5 adds each fault face's slid flag: a format-4 checkpoint of a scene without faults continues as
+    before; one with faults (it has no flags) is refused in one line, before anything is written."""
+    import h5py
+    opts, extra, end, half = SCENES["oedometer"]
+    part = tmp_path / "part"
+    run_scene(opts, part, extra=_steps(extra, 2, half))
+    with h5py.File(part / "checkpoint.h5", "r+") as h5:
+        h5.attrs["format"] = 4
+    _, s = run_scene(opts, part, extra=[*_steps(extra, 4, end), "-pfault_restart", str(part)])
+    assert s["converged"] and s["completed_steps"][-1] == 4
+    faulted = tmp_path / "faulted"
+    run_scene(TWO_BLOCKS, faulted, extra=_steps((), 1, "0.5"))
+    with h5py.File(faulted / "checkpoint.h5", "r+") as h5:
+        assert h5.attrs["format"] == 5 and h5["faults/slid"].shape == (h5.attrs["fault_faces"],)
+        h5.attrs["format"] = 4
+        del h5["faults/slid"]
+    before = {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)}
+    proc, _ = run_scene(TWO_BLOCKS, faulted, extra=[*_steps((), 2, "1"), "-pfault_restart", str(faulted)],
+                        check=False)
+    assert proc.returncode == 1, proc.stderr
+    assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
+        f"pfault: error: -pfault_restart {faulted}: its checkpoint.h5 has format 4, written by another version of "
+        "pfault; this one reads format 5 (continue that run with the pfault that wrote it, or run it again)"]
+    assert {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)} == before
+
+
 def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     """A checkpoint of format 2 (fault multipliers per serial cell, u/cell_ids and u/cell) is an input error in
     one line, before anything is written."""
@@ -141,7 +150,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     part = tmp_path / "part"
     run_scene(opts, part, extra=_steps(extra, 2, half))
     with h5py.File(part / "checkpoint.h5", "r+") as h5:
-        assert h5.attrs["format"] == 4
+        assert h5.attrs["format"] == 5
         h5.attrs["format"] = 2
         h5["u/cell_ids"], h5["u/cell"] = np.zeros(0, np.int64), np.zeros((0, 0))
     before = {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)}
@@ -150,7 +159,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     assert proc.returncode == 1, proc.stderr
     assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
         f"pfault: error: -pfault_restart {part}: its checkpoint.h5 has format 2, written by another version of "
-        "pfault; this one reads format 4 (continue that run with the pfault that wrote it, or run it again)"]
+        "pfault; this one reads format 5 (continue that run with the pfault that wrote it, or run it again)"]
     assert {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)} == before
 
 
@@ -202,11 +211,11 @@ def test_restart_may_change_the_load_only_after_the_checkpoint(tmp_path):
     compare_runs(ref, part, RTOL)
 
 
-def test_restart_may_change_the_well_rate_only_after_the_checkpoint(tmp_path):
+def test_restart_may_change_the_well_rate_only_after_the_checkpoint(tmp_path, flow_box):
     """The flow box on 2 ranks, pumped at 3 L/s from day 1 (ramped up from 0 at t = 0), stopped after 1 day:
     continued with another rate on the first day it is an input error; with the rate doubled from day 1 to
     day 2 it equals the run pumped so from the start, and its drawdown differs from the unchanged one's."""
-    opts = scene_file(tmp_path, "flow")
+    opts = flow_box
     part, ref, same = tmp_path / "part", tmp_path / "ref", tmp_path / "same"
     run_scene(opts, part, ranks=2, extra=_steps((), 2, "1*day"))
     proc, _ = run_scene(opts, part, ranks=2, extra=[*_steps((), 4, "2*day"), "-pfault_restart", str(part),

@@ -29,7 +29,6 @@ def run(budget, outdir):
     FactorReuse.budget = lambda self: budget
     PETSc.Options().setValue("pfault_output_dir", outdir)
     sim = Simulation(SCENE, sys.argv)
-    sim.setup()
     summary = sim.run()
     figures = {k: summary[k] for k in ("max_subsidence_m", "max_horizontal_displacement_m", "max_fault_opening_m",
                                        "max_fault_slip_m")}

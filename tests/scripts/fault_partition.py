@@ -20,7 +20,6 @@ from petsc4py import PETSc  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 sim = Simulation(SCENE, sys.argv)
-sim.setup()
 faults = sim.model.faults
 counts = [int(c) for c in faults.faces.mpi.allgather(faults.faces.nf)]
 mesh = sim.model.mesh

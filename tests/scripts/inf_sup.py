@@ -20,7 +20,6 @@ from petsc4py import PETSc  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 sim = Simulation("config/two_blocks.opts", sys.argv)
-sim.setup()
 p, f = sim.model.equations, sim.model.faults
 f.begin_step(p.local_array(sim.state.u))
 p.assemble_jacobian(sim.state.u, p.J)

@@ -17,11 +17,12 @@ import sys
 import petsc4py
 
 from pfault.__main__ import check_arguments
+from pfault.optionsfile import petsc_arguments
 
 kind, rank, step = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 argv = [sys.argv[0]] + sys.argv[4:]
 scene, rest = check_arguments(argv)
-petsc4py.init([argv[0], "-options_file", scene] + rest)
+petsc4py.init([argv[0]] + petsc_arguments(scene, rest))
 from petsc4py import PETSc  # noqa: E402
 
 from pfault import cli, simulation  # noqa: E402

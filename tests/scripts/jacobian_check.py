@@ -107,7 +107,6 @@ G_PREV = (0.0, 1e-3, 2e-3)
 
 def lagrange_cases(results):
     sim = Simulation(SCENE, sys.argv)
-    sim.setup()
     p, f = sim.model.equations, sim.model.faults
     p.loads.set(1.0)
     rng = np.random.default_rng(1234 + COMM.rank)
@@ -132,7 +131,6 @@ def penalty_cases(results):
     opts = PETSc.Options()
     opts.setValue("pfault_fault_fault_method", "penalty")
     sim = Simulation(SCENE, sys.argv)
-    sim.setup()
     p, f = sim.model.equations, sim.model.faults
     p.loads.set(1.0)
     rng = np.random.default_rng(4321 + COMM.rank)

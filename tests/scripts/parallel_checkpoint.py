@@ -18,8 +18,10 @@ import sys
 
 import petsc4py
 
+from pfault.optionsfile import petsc_arguments
+
 scene, gathered_dir, own_dir = sys.argv[1:4]
-petsc4py.init([sys.argv[0], "-options_file", scene] + sys.argv[4:])
+petsc4py.init([sys.argv[0]] + petsc_arguments(scene, sys.argv[4:]))
 from petsc4py import PETSc  # noqa: E402
 
 from pfault.errors import run_on_root  # noqa: E402
@@ -63,9 +65,7 @@ class Twice(Simulation):
 
 comm = PETSc.COMM_WORLD
 sim = Twice(scene, sys.argv)
-sim.setup()
-sim.run()
-run_on_root(comm, sim.write_summary, 0.0)
+run_on_root(comm, sim.write_summary, sim.run(), 0.0)
 mpi = comm.tompi4py()
 blocks = {}
 ck = sim.output.checkpoint

@@ -13,8 +13,10 @@ import sys
 
 import petsc4py
 
+from pfault.optionsfile import petsc_arguments
+
 scene, gathered_dir = sys.argv[1], sys.argv[2]
-petsc4py.init([sys.argv[0], "-options_file", scene] + sys.argv[3:])
+petsc4py.init([sys.argv[0]] + petsc_arguments(scene, sys.argv[3:]))
 from petsc4py import PETSc  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -61,9 +63,7 @@ class Twice(Simulation):
 
 comm = PETSc.COMM_WORLD
 sim = Twice(scene, sys.argv)
-sim.setup()
-sim.run()
-run_on_root(comm, sim.write_summary, 0.0)
+run_on_root(comm, sim.write_summary, sim.run(), 0.0)
 run_on_root(comm, lambda: sim.mirror.writer.close())
 out = sim.output.fields
 blocks = {}

@@ -66,7 +66,6 @@ def one(method, k=None):
         opts.setValue("pfault_fault_fault_penalty_normal", repr(k))
         opts.setValue("pfault_fault_fault_penalty_tangential", repr(k))
     sim = Simulation(SCENE, sys.argv)
-    sim.setup()
     p, f, dm = sim.model.equations, sim.model.faults, sim.model.dofmap
     p.loads.set(1.0)
     x = sim.state.u.duplicate()
