@@ -38,6 +38,8 @@ from ..units import parse_list, parse_quantity, parse_table
 
 NUMERIC_KINDS = ("real", "quantity")
 TEMPLATE_KINDS = ("table", "list")
+KIND_WORDS = {"string": "a text", "choice": "one of a few words", "bool": "true or false", "names": "names",
+              "int": "a whole number", "ints": "whole numbers", "table": "a table", "list": "a list"}
 PARAMETER_COLUMNS = ("name", "option", "start", "lower", "upper")
 OBSERVATION_COLUMNS = ("name", "time", "ux", "uy", "uz", "sigma")
 COMPONENTS = ("ux", "uy", "uz")
@@ -140,7 +142,7 @@ def _parameter(path, line, cells):
                                     "-pfault_ option (python -m pfault -help lists them)")
     if spec.kind not in NUMERIC_KINDS + TEMPLATE_KINDS or (spec.kind in TEMPLATE_KINDS and not template):
         raise CalibrationInputError(
-            f"{where}: -{option} takes a {spec.kind}, not a number; give a numeric -pfault_ option (a real or "
+            f"{where}: -{option} takes {KIND_WORDS.get(spec.kind, spec.kind)}, not a real number; give a numeric -pfault_ option (a real or "
             "a quantity), or for a table or list option a value column with {" + name + "} where the "
             "parameter goes (e.g. 0:{" + name + "},10*year:{" + name + "})")
     template = template or "{" + name + "}"
