@@ -45,8 +45,9 @@ def true_overrides():
             "pfault_flow_well_rate": TEMPLATES["Q"].replace("{Q}", repr(TRUE["Q"]))}
 
 
-def write_observations(path, run_dir, days):
-    """Runs the scene at the true values and writes its station displacements at `days` with noise."""
+def write_observations(path, run_dir, days, noise=True):
+    """Runs the scene at the true values and writes its station displacements at `days`, with noise unless
+    told (sigma is 2 % of each true value either way)."""
     result = run_pfault(Run(SCENE, run_dir, true_overrides()), cwd=REPO, env=mpi_env())
     assert result.ok, result.error
     series = read_station_series(run_dir)
@@ -62,16 +63,16 @@ def write_observations(path, run_dir, days):
                     k = ("ux", "uy", "uz").index(c)
                     sigma = NOISE * abs(row[k])
                     cells = ["", "", ""]
-                    cells[k] = repr(row[k] + sigma * rng.standard_normal())
+                    cells[k] = repr(row[k] + noise * sigma * rng.standard_normal())
                     w.writerow([name, f"{d}*day", *cells, repr(sigma)])
 
 
-def calibrate(workdir, days, workers=2, extra=()):
+def calibrate(workdir, days, workers=2, noise=True, extra=()):
     """Writes the twin's files into workdir and runs the calibration there; the CompletedProcess."""
     os.makedirs(workdir, exist_ok=True)
     params, obs = os.path.join(workdir, "parameters.csv"), os.path.join(workdir, "observations.csv")
     write_parameters(params)
-    write_observations(obs, os.path.join(workdir, "truth"), days)
+    write_observations(obs, os.path.join(workdir, "truth"), days, noise)
     cmd = [sys.executable, "-m", "pfault.calibrate", SCENE, "--parameters", params, "--observations", obs,
            "--workers", str(workers), "--output", os.path.join(workdir, "fit"), *extra]
     return subprocess.run(cmd, cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=1800)
