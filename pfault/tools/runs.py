@@ -18,6 +18,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -26,6 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 STATIONS_CSV = "station_displacement.csv"
+_LIVE: set = set()                 # runs under way (run_many stops them all when its caller is interrupted)
+_LIVE_LOCK = threading.Lock()
 ERROR_PREFIXES = ("pfault: error:", "pfault: internal error:")
 
 
@@ -88,7 +91,8 @@ def error_line(output: str) -> str | None:
 
 def run_pfault(run: Run, cwd: str | None = None, env: Mapping[str, str] | None = None) -> RunResult:
     """Makes one run and waits for it; its output goes to ``<output_dir>.log``. A run past its timeout is
-    killed with its ranks (its own process group), and so is a run whose caller is interrupted."""
+    killed with its ranks (its own process group), and so is a run whose caller is interrupted (run_many
+    stops the runs of its other threads too)."""
     out = os.path.abspath(os.path.join(cwd or os.getcwd(), run.output_dir))
     os.makedirs(os.path.dirname(out), exist_ok=True)
     log = out.rstrip(os.sep) + ".log"
@@ -96,6 +100,8 @@ def run_pfault(run: Run, cwd: str | None = None, env: Mapping[str, str] | None =
     with open(log, "w") as fh:
         proc = subprocess.Popen(pfault_command(run), cwd=cwd, env=run_environment(env), stdout=fh,
                                 stderr=subprocess.STDOUT, start_new_session=True)
+        with _LIVE_LOCK:
+            _LIVE.add(proc)
         try:
             code = proc.wait(timeout=run.timeout)
             timed_out = False
@@ -104,6 +110,9 @@ def run_pfault(run: Run, cwd: str | None = None, env: Mapping[str, str] | None =
         except BaseException:
             _kill(proc)
             raise
+        finally:
+            with _LIVE_LOCK:
+                _LIVE.discard(proc)
     wall = time.perf_counter() - t0
     with open(log, errors="replace") as fh:
         text = fh.read()
@@ -127,8 +136,18 @@ def run_many(runs: Iterable[Run], workers: int = 1, cwd: str | None = None,
     runs = list(runs)
     if workers <= 1 or len(runs) <= 1:
         return [run_pfault(r, cwd, env) for r in runs]
-    with ThreadPoolExecutor(max_workers=min(workers, len(runs))) as pool:
+    pool = ThreadPoolExecutor(max_workers=min(workers, len(runs)))
+    try:
         return list(pool.map(lambda r: run_pfault(r, cwd, env), runs))
+    except BaseException:            # Ctrl-C reaches this thread only: stop the runs (own sessions) here
+        pool.shutdown(wait=False, cancel_futures=True)
+        with _LIVE_LOCK:
+            live = list(_LIVE)
+        for proc in live:
+            _kill(proc)
+        raise
+    finally:
+        pool.shutdown(wait=True)
 
 
 def read_summary(output_dir: str) -> dict | None:
