@@ -40,7 +40,8 @@ CASES = {
                     "-pfault_ option (a real or a quantity), or for a table or list option a value column with "
                     "{E_clay} where the parameter goes (e.g. 0:{E_clay},10*year:{E_clay})"),
     "table without template": (PARAMS.replace('"0:{Q},120*day:{Q}"', ""), OBS,
-                               "parameter file {p} line 3: -pfault_flow_well_rate takes a table, not a real number; give "
+                               "parameter file {p} line 3: -pfault_flow_well_rate takes a table, not a real number; "
+                               "give "
                                "a numeric -pfault_ option (a real or a quantity), or for a table or list option a "
                                "value column with {Q} where the parameter goes (e.g. 0:{Q},10*year:{Q})"),
     "bounds reversed": (PARAMS.replace("1*MPa,100*MPa", "100*MPa,1*MPa"), OBS,
