@@ -6,6 +6,8 @@ directory, figures off), up to --workers runs side by side. The file formats are
 pfault.tools.calibration_input, the method in pfault.tools.calibration, the outputs in
 pfault.tools.calibration_report; README.md and docs/calibration.md have the walkthrough.
 
+With --pest DIR it writes the problem as PEST/PEST++ files instead (pfault.tools.pest).
+
 Exit codes: 0 fitted (calibration.json says whether the optimiser converged or stopped at
 --max-iterations); 1 bad input (one line naming the file and the fix; nothing written); 2 usage; 3 a forward
 run the fit cannot do without failed (its one-line error is printed; runs.csv and the runs' logs stay);
@@ -40,6 +42,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--max-iterations", type=int, default=20, help="most evaluations of the objective at new "
                    "points (each followed by a Jacobian of N parameters: N runs) (default 20)")
     p.add_argument("--timeout", type=float, help="s after which a forward run is stopped and counts as failed")
+    p.add_argument("--pest", metavar="DIR", help="write the problem as PEST/PEST++ files into DIR (pfault.pst, "
+                   "parameters.tpl, simulated.ins, ...) and stop, without fitting")
     p.add_argument("--keep-runs", action="store_true", help="keep every forward run's output directory (by "
                    "default only their logs, runs/NNNN.log, and the fitted run)")
     return p
@@ -81,6 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     if len(obs.value) <= len(params):
         return _fail(f"observation file {args.observations}: {len(obs.value)} measured components for "
                      f"{len(params)} parameters; give more observations than parameters", EXIT_INPUT)
+    if args.pest:
+        return _write_pest(args, params, obs)
     out = args.output or os.path.join("runs", "calibrate_" + os.path.splitext(os.path.basename(args.scene))[0])
     problem_line = _check_output(out)
     if problem_line:
@@ -111,6 +117,16 @@ def main(argv: list[str] | None = None) -> int:
         for ev in problem.evaluations:
             shutil.rmtree(ev.result.run.output_dir, ignore_errors=True)
     _print_result(problem, result, out)
+    return EXIT_OK
+
+
+def _write_pest(args, params, obs):
+    from .tools.pest import write_pest
+    if os.path.isdir(args.pest) and os.listdir(args.pest):
+        return _fail(f"--pest {args.pest} is not empty; give a new or empty directory", EXIT_INPUT)
+    os.makedirs(args.pest, exist_ok=True)
+    write_pest(args.pest, args.scene, params, obs, args.max_iterations)
+    print(f"{PROG}: PEST files in {args.pest}: pestpp-glm pfault.pst runs them (from that directory)")
     return EXIT_OK
 
 

@@ -2,7 +2,8 @@
 # Installs what pfault needs on Debian 12, once: Debian's PETSc stack, OpenBLAS, and a venv
 # (system site packages) holding pfault (editable) and what it takes from PyPI: gmsh, meshio, pytest, matplotlib
 # (figures), flopy (MODFLOW head and grid files), h5netcdf (the InSAR raster, NetCDF-4 through h5py), netCDF4
-# (the tests read the raster back with the netCDF library) and scipy (least squares of python -m pfault.calibrate).
+# (the tests read the raster back with the netCDF library), scipy (least squares of python -m pfault.calibrate) and
+# pyemu (the tests read its PEST++ files back).
 # Seconds when ready.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,8 +23,8 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv (with system site packages: Debian's petsc4py, mpi4py, numpy, h5py)"
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
-PYPI="gmsh meshio pytest matplotlib flopy h5netcdf netCDF4 scipy"
-if ! .venv/bin/python -c "import gmsh, meshio, pytest, matplotlib, flopy, h5netcdf, netCDF4, scipy" >/dev/null 2>&1; then
+PYPI="gmsh meshio pytest matplotlib flopy h5netcdf netCDF4 scipy pyemu"
+if ! .venv/bin/python -c "import gmsh, meshio, pytest, matplotlib, flopy, h5netcdf, netCDF4, scipy, pyemu" >/dev/null 2>&1; then
   echo "setup: installing $PYPI into .venv"
   # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command
   .venv/bin/pip install -q --disable-pip-version-check $PYPI "numpy==$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"

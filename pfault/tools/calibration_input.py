@@ -143,8 +143,8 @@ def _parameter(path, line, cells):
     if spec.kind not in NUMERIC_KINDS + TEMPLATE_KINDS or (spec.kind in TEMPLATE_KINDS and not template):
         raise CalibrationInputError(
             f"{where}: -{option} takes {KIND_WORDS.get(spec.kind, spec.kind)}, not a real number; give a numeric "
-            "-pfault_ option (a real or a quantity), or for a table or list option a value column with {" + name + "} where the "
-            "parameter goes (e.g. 0:{" + name + "},10*year:{" + name + "})")
+            "-pfault_ option (a real or a quantity), or for a table or list option a value column with {" + name
+            + "} where the parameter goes (e.g. 0:{" + name + "},10*year:{" + name + "})")
     template = template or "{" + name + "}"
     if "{" + name + "}" not in template:
         raise CalibrationInputError(f"{where}: the value '{template}' has no {{{name}}}; put {{{name}}} where the "
