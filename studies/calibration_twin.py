@@ -26,6 +26,7 @@ TEMPLATES = {"Q": "0:{Q},120*day:{Q}"}
 NOISE = 0.02                 # relative standard deviation of the observations
 SEED = 20261125
 DAY = 86400.0
+RUN_TIMEOUT = 300            # s: a forward run (2 s on an idle machine) that hangs fails instead
 # the measured components: settlement everywhere, the horizontal motion towards the well off its axis
 COMPONENTS = {"W0": ("uz",), "N1": ("uy", "uz"), "E1": ("ux", "uz"), "NE2": ("ux", "uy", "uz"),
               "E3": ("ux", "uz")}
@@ -48,7 +49,7 @@ def true_overrides():
 def write_observations(path, run_dir, days, noise=True):
     """Runs the scene at the true values and writes its station displacements at `days`, with noise unless
     told (sigma is 2 % of each true value either way)."""
-    result = run_pfault(Run(SCENE, run_dir, true_overrides()), cwd=REPO, env=mpi_env())
+    result = run_pfault(Run(SCENE, run_dir, true_overrides(), timeout=RUN_TIMEOUT), cwd=REPO, env=mpi_env())
     assert result.ok, result.error
     series = read_station_series(run_dir)
     rng = np.random.default_rng(SEED)
@@ -67,12 +68,13 @@ def write_observations(path, run_dir, days, noise=True):
                     w.writerow([name, f"{d}*day", *cells, repr(sigma)])
 
 
-def calibrate(workdir, days, workers=2, noise=True, extra=()):
-    """Writes the twin's files into workdir and runs the calibration there; the CompletedProcess."""
+def calibrate(workdir, days, workers=2, noise=True, extra=(), timeout=900):
+    """Writes the twin's files into workdir and runs the calibration there (each forward run stopped after
+    RUN_TIMEOUT s, the whole after timeout s); the CompletedProcess."""
     os.makedirs(workdir, exist_ok=True)
     params, obs = os.path.join(workdir, "parameters.csv"), os.path.join(workdir, "observations.csv")
     write_parameters(params)
     write_observations(obs, os.path.join(workdir, "truth"), days, noise)
     cmd = [sys.executable, "-m", "pfault.calibrate", SCENE, "--parameters", params, "--observations", obs,
-           "--workers", str(workers), "--output", os.path.join(workdir, "fit"), *extra]
-    return subprocess.run(cmd, cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=1800)
+           "--workers", str(workers), "--output", os.path.join(workdir, "fit"), "--timeout", str(RUN_TIMEOUT), *extra]
+    return subprocess.run(cmd, cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=timeout)
