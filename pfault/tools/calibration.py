@@ -23,6 +23,7 @@ value p ln(10) se is reported too.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -67,12 +68,12 @@ class Problem:
     def scale(self) -> np.ndarray:
         return np.array([1.0 if p.log else abs(p.start) or 1.0 for p in self.parameters])
 
-    def to_x(self, values) -> np.ndarray:
+    def to_x(self, values: Sequence[float] | np.ndarray) -> np.ndarray:
         values = np.asarray(values, dtype=np.float64)
         logs = np.array([p.log for p in self.parameters])
         return np.where(logs, np.log10(np.where(logs, values, 1.0)), values / self.scale())
 
-    def to_values(self, x) -> np.ndarray:
+    def to_values(self, x: Sequence[float] | np.ndarray) -> np.ndarray:
         logs = np.array([p.log for p in self.parameters])
         return np.where(logs, 10.0 ** np.asarray(x), np.asarray(x) * self.scale())
 
@@ -80,7 +81,7 @@ class Problem:
         return (self.to_x([p.lower for p in self.parameters]), self.to_x([p.upper for p in self.parameters]))
 
     # -- runs
-    def overrides(self, values) -> dict[str, str]:
+    def overrides(self, values: Sequence[float] | np.ndarray) -> dict[str, str]:
         return {p.option: p.option_value(v) for p, v in zip(self.parameters, values)}
 
     def evaluate(self, xs: list[np.ndarray], purpose: str) -> list[Evaluation]:
@@ -169,7 +170,8 @@ class Fit:
     evaluation: Evaluation       # the run at the optimum
 
 
-def statistics(jac: np.ndarray, phi: float, values: np.ndarray, log: np.ndarray, scale: np.ndarray):
+def statistics(jac: np.ndarray, phi: float, values: np.ndarray, log: np.ndarray,
+               scale: np.ndarray) -> tuple[int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(dof, s^2, covariance of x, se of x, se of the values, correlation) of a weighted least-squares
     optimum whose weighted-residual Jacobian in x is jac."""
     m, n = jac.shape
