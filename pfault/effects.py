@@ -10,10 +10,17 @@ from PETSc's log, not from timers of our own.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from petsc4py import PETSc
+
+if TYPE_CHECKING:
+    from .faults.settings import FaultSettings
+    from .physics.loading import MaterialDrawdown
+    from .scene import Boundary, Material, Settings
 
 # effect -> the PETSc log events its work runs in
 EVENTS = {
@@ -27,12 +34,12 @@ EVENTS = {
 }
 
 
-def event(name):
+def event(name: str) -> PETSc.Log.Event:
     return PETSc.Log.Event(name)
 
 
 @contextmanager
-def logged(name):
+def logged(name: str) -> Iterator[None]:
     """Run the block inside the PETSc log event ``name``."""
     ev = event(name)
     ev.begin()
@@ -52,10 +59,10 @@ class Effects:
     displacements: tuple   # surfaces with prescribed displacements
     heads: str = ""        # the groundwater model's head file (-pfault_heads_file), or ""
 
-    def on(self, name):
+    def on(self, name: str) -> bool:
         return bool(getattr(self, name))
 
-    def detail(self, name):
+    def detail(self, name: str) -> str:
         v = getattr(self, name)
         if name == "faults":
             return ", ".join(f"{n} ({m})" for n, m in v)
@@ -67,7 +74,7 @@ class Effects:
             return v
         return ", ".join(v)
 
-    def line(self):
+    def line(self) -> str:
         """One line naming every effect and whether the scene asks for it."""
         label = {"faults": "faults", "flow": "groundwater flow", "pressure_tables": "pore-pressure tables",
                  "geostatic": "geostatic start", "tractions": "boundary tractions",
@@ -77,7 +84,8 @@ class Effects:
         return "effects: " + "; ".join(parts)
 
 
-def decide(settings, materials, drawdown, flow, faults, boundaries, heads=""):
+def decide(settings: Settings, materials: Sequence[Material], drawdown: MaterialDrawdown, flow: bool,
+           faults: Iterable[FaultSettings], boundaries: Iterable[Boundary], heads: str = "") -> Effects:
     """Effects of a scene from its settings: the material names, the drawdown tables, whether the flow model is
     on, the fault settings, the boundary conditions and the head file of a groundwater model ("" without)."""
     tables = tuple(m.name for m, tab in zip(materials, drawdown.tables) if tab is not None)
@@ -90,7 +98,7 @@ def decide(settings, materials, drawdown, flow, faults, boundaries, heads=""):
                    heads=heads)
 
 
-def event_total(name, key="time"):
+def event_total(name: str, key: str = "time") -> float:
     """An event's ``key`` ("time" in seconds, "count") so far on this rank, summed over every log stage
     (0 unless PETSc's logging is on)."""
     ev, total, stage = event(name), 0.0, 0
@@ -102,7 +110,7 @@ def event_total(name, key="time"):
         stage += 1
 
 
-def event_times(names):
+def event_times(names: Iterable[str]) -> float:
     """Seconds spent so far in the given events on this rank."""
     return sum(event_total(n) for n in names)
 
@@ -110,21 +118,21 @@ def event_times(names):
 class EffectCosts:
     """Set-up and per-step time of each effect, from PETSc's log (max over ranks)."""
 
-    def __init__(self, comm):
+    def __init__(self, comm: PETSc.Comm) -> None:
         self.comm = comm
         PETSc.Log.begin()
         for names in EVENTS.values():
             for n in names:
                 event(n)
-        self.at_setup = None
+        self.at_setup: dict[str, float] | None = None
 
-    def mark_setup(self):
+    def mark_setup(self) -> None:
         self.at_setup = {k: event_times(v) for k, v in EVENTS.items()}
 
-    def record(self, effects, n_steps):
+    def record(self, effects: Effects, n_steps: int) -> dict[str, dict[str, Any]]:
         from mpi4py import MPI
         mpi = self.comm.tompi4py()
-        out = {}
+        out: dict[str, dict[str, Any]] = {}
         for k, names in EVENTS.items():
             if not effects.on(k):       # (the pore-pressure load is the flow's or the tables')
                 out[k] = {"on": False, "detail": "", "setup_s": 0.0, "per_step_s": 0.0}

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from petsc4py import PETSc
 
-from . import checks, fields, scene as scn
+from . import checks, fields, properties, scene as scn
 from .assembly.elastic import ElasticAssembler
 from .effects import logged
 from .effects import decide as decide_effects
@@ -53,13 +53,15 @@ class Model:
     """A run's model. ``serial`` and ``split`` (the serial mesh and its fault split) are held by rank 0 only;
     ``faults`` is the fault interface (None without faults), ``fault_id`` the fault of every fault face (serial
     order; None without faults), ``source`` the pore-pressure source, ``equations`` the discrete problem,
-    ``solver_file`` the solver options file applied (None: none)."""
+    ``solver_file`` the solver options file applied (None: none); ``properties`` the materials' properties per
+    local cell (pfault.properties.CellProperties)."""
     comm: Any
     scene: Scene
     serial: Any
     split: Any
     mesh: Any
     dofmap: Any
+    properties: Any
     assembler: Any
     fault_id: Any
     faults: Any
@@ -159,7 +161,17 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     return scene, serial
 
 
-def _serial_arrays(scene: Scene, serial: Any) -> tuple:
+def _field_values(scene: Scene, serial: Any, options_file: str) -> dict:
+    """Rank 0: the material properties given as fields, on the serial cells ({option: values}; empty without
+    fields)."""
+    refs = properties.field_refs(scene.materials, scene.flow_settings)
+    if not refs:
+        return {}
+    return properties.serial_field_values(scene.material_names, refs, serial.points, serial.tets,
+                                          serial.cell_material, options_file, scene.mesh_origin)
+
+
+def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
     """Rank 0: the boundary arrays of the serial mesh, its fault split and the faults' topology."""
     s = scene.settings
     out = scn.boundary_arrays(serial, scene.boundaries, s.ground_surface)
@@ -173,7 +185,8 @@ def _serial_arrays(scene: Scene, serial: Any) -> tuple:
         from .faults.interface import fault_topology
         from .mesh.fault import split_faults
         split = split_faults(serial, fault_names)
-        topology = fault_topology(serial, split, scene.materials)
+        cell = properties.CellProperties.of_cells(scene.materials, serial.cell_material, serial_values)
+        topology = fault_topology(serial, split, cell.young_modulus, cell.poisson_ratio)
     written = 1 + s.time_steps // s.output_every + (s.time_steps % s.output_every > 0)
     checks.check_output_space(s.output_dir, checks.output_bytes(
         len(serial.points) + (len(split.split_vertices) if split else 0), len(serial.tets),
@@ -181,7 +194,7 @@ def _serial_arrays(scene: Scene, serial: Any) -> tuple:
     return out, split, topology
 
 
-def _source(scene: Scene, mesh: Any) -> Any:
+def _source(scene: Scene, mesh: Any, props: Any, field_values: dict | None) -> Any:
     """The pore-pressure source: the flow model, a groundwater model's heads, or the per-material tables."""
     if scene.heads_settings is not None:
         with logged("pfaultHeadsRead"):
@@ -190,8 +203,10 @@ def _source(scene: Scene, mesh: Any) -> Any:
     if scene.flow_settings is None:
         return TableSource(scene.drawdown, mesh.cell_material)
     from .solver.flow import FIXED_HEAD_BIT, GroundwaterFlow
-    fs, mat, s = scene.flow_settings, mesh.cell_material, scene.settings
-    return FlowSource(GroundwaterFlow(mesh, fs.conductivity[mat], fs.storage[mat], wells=fs.wells,
+    fs, s = scene.flow_settings, scene.settings
+    k, ss = properties.flow_cell_properties(fs, props, mesh.cell_material, field_values, mesh.cell_serial,
+                                            s.water_density, s.gravity)
+    return FlowSource(GroundwaterFlow(mesh, k, ss, wells=fs.wells,
                                       fixed_head=(mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0,
                                       substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity))
 
@@ -229,12 +244,17 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     stage.push()
     scene, serial = read_scene(comm, reader, options_file)
     PETSc.Sys.Print("pfault:", scene.effects.line())
-    arr = run_on_root(comm, _serial_arrays, scene, serial)
+    serial_values = run_on_root(comm, _field_values, scene, serial, options_file)
+    arr = run_on_root(comm, _serial_arrays, scene, serial, serial_values)
     (mask, face_tag, ground), split, topology = arr if arr is not None else ((None, None, None), None, None)
     mesh = distributed.build(comm, serial, cell_face_tag=face_tag, vert_constraint=mask, vert_ground=ground,
                              split=split)
     if scene.fault_settings:
         topology = comm.tompi4py().bcast(topology if comm.rank == 0 else None)
+    if comm.size > 1 and properties.field_refs(scene.materials, scene.flow_settings):
+        serial_values = comm.tompi4py().bcast(serial_values if comm.rank == 0 else None)  # the fields' values
+    cell_props = properties.CellProperties.of_cells(scene.materials, mesh.cell_material, serial_values,
+                                                    mesh.cell_serial)
     stage.pop()
     wall = {"mesh": time.perf_counter() - t0}
 
@@ -246,15 +266,15 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     solver_file = _apply_solver(scene, mesh, options_file)
     source = None
     try:
-        assembler = ElasticAssembler(mesh, dofmap, scene.materials)
-        source = _source(scene, mesh)
+        assembler = ElasticAssembler(mesh, dofmap, cell_props)
+        source = _source(scene, mesh, cell_props, serial_values)
         faults = None
         if scene.effects.faults:
             from .faults.faces import FaultFaces
             from .faults.interface import FaultInterface
             _check_iterative_faults(scene.fault_settings)
             with logged("pfaultFaultSetup"):
-                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, scene.materials,
+                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, cell_props.young_modulus,
                                    constrained_local(mesh, dofmap), mesh.dm.getLGMap())
                 faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact)
         equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, faults,
@@ -271,5 +291,5 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
         raise
     stage.pop()
     wall["setup"] = time.perf_counter() - t0
-    return Model(comm, scene, serial, split, mesh, dofmap, assembler, fault_id, faults, source, equations, solver_file,
-                 wall)
+    return Model(comm, scene, serial, split, mesh, dofmap, cell_props, assembler, fault_id, faults, source, equations,
+                 solver_file, wall)

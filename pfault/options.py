@@ -19,7 +19,7 @@ from .units import parse_list, parse_quantity, parse_table
 @dataclass(frozen=True)
 class Spec:
     name: str            # without the leading '-', may contain <material>, <surface>, <fault>
-    kind: str            # string | choice | real | int | ints | bool | quantity | list | table | names
+    kind: str            # string | choice | real | int | ints | bool | quantity | property | list | table | names
     default: object
     unit: str
     help: str
@@ -71,20 +71,20 @@ SPECS = [
     _s("pfault_box_fault_planes", "names", "", "m", "internal surfaces of the box as name:axis:value, "
        "optionally limited to a rectangle name:axis:value:lo1:hi1:lo2:hi2 of the other two coordinates"),
     # materials
-    _s("pfault_material_<material>_young_modulus", "quantity", None, "Pa", "drained Young's modulus (required)"),
-    _s("pfault_material_<material>_poisson_ratio", "quantity", None, "", "drained Poisson ratio (required)"),
-    _s("pfault_material_<material>_biot_coefficient", "quantity", 1.0, "", "Biot coefficient alpha"),
-    _s("pfault_material_<material>_density", "quantity", 2000.0, "kg/m**3", "bulk (saturated) density, used "
+    _s("pfault_material_<material>_young_modulus", "property", None, "Pa", "drained Young's modulus (required)"),
+    _s("pfault_material_<material>_poisson_ratio", "property", None, "", "drained Poisson ratio (required)"),
+    _s("pfault_material_<material>_biot_coefficient", "property", 1.0, "", "Biot coefficient alpha"),
+    _s("pfault_material_<material>_density", "property", 2000.0, "kg/m**3", "bulk (saturated) density, used "
        "by the geostatic initial stress"),
     _s("pfault_material_<material>_head_drawdown", "table", None, "m", "drawdown of hydraulic head as "
        "time:value pairs, linear in between (dp = -rho_w g h); positive is a drop"),
     _s("pfault_material_<material>_pressure_change", "table", None, "Pa", "pore-pressure change as "
        "time:value pairs, linear in between; negative is a drawdown"),
-    _s("pfault_material_<material>_hydraulic_conductivity", "quantity", None, "m/s", "isotropic hydraulic "
+    _s("pfault_material_<material>_hydraulic_conductivity", "property", None, "m/s", "isotropic hydraulic "
        "conductivity K (required with -pfault_flow)"),
-    _s("pfault_material_<material>_specific_storage", "quantity", None, "1/m", "specific storage S_s (default: "
+    _s("pfault_material_<material>_specific_storage", "property", None, "1/m", "specific storage S_s (default: "
        "rho_w g (alpha c_M + n beta_w), c_M oedometric compressibility, n = e/(1+e), beta_w = 4.4e-10 1/Pa)"),
-    _s("pfault_material_<material>_void_ratio", "quantity", 0.7, "", "void ratio e (porosity e/(1+e) in the "
+    _s("pfault_material_<material>_void_ratio", "property", 0.7, "", "void ratio e (porosity e/(1+e) in the "
        "specific storage)"),
     # boundary conditions
     _s("pfault_bc_<surface>_type", "choice", "free", "", "boundary condition on a physical surface",
@@ -202,7 +202,9 @@ def spec_for(name: str) -> Spec | None:
 
 
 def help_text() -> str:
-    lines = ["pfault options (units in brackets; quantities accept units such as 10*year, -0.1*MPa):", ""]
+    lines = ["pfault options (units in brackets; quantities accept units such as 10*year, -0.1*MPa; a material "
+             "property may name a spatial field instead, field:FILE[,variable=NAME][,outside=nearest], CSV, HDF5 "
+             "or NetCDF points or grid in x, y, z, interpolated at the cell centroids):", ""]
     width = max(len(s.name) for s in SPECS) + 2
     for s in SPECS:
         default = "" if s.default in (None, "") else f" (default {s.default})"
@@ -272,6 +274,12 @@ class OptionReader:
         if kind == "ints":
             return [_whole_number(t, name) for t in str(text).split(",") if t.strip()]
         if kind in ("real", "quantity"):
+            return parse_quantity(text, name, spec.unit)
+        if kind == "property":
+            # a number, or field:FILE[,variable=NAME][,outside=error|nearest] (pfault.properties)
+            from .properties import FIELD_PREFIX, parse_field
+            if str(text).strip().startswith(FIELD_PREFIX):
+                return parse_field(str(text), name, spec.unit)
             return parse_quantity(text, name, spec.unit)
         if kind == "list":
             return parse_list(text, name, spec.unit) if str(text).strip() else []

@@ -15,6 +15,7 @@ import numpy as np
 
 from .errors import InputError
 from .physics.loading import MaterialDrawdown, Table
+from .properties import FieldRef, is_field
 
 if TYPE_CHECKING:
     from .faults.settings import ContactSettings, FaultSettings
@@ -24,11 +25,13 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Material:
+    """A material's properties as its options give them: a number (SI), or a field (pfault.properties.FieldRef)
+    interpolated at the cells' centroids; the model turns them into per-cell arrays (pfault.properties)."""
     name: str
-    young_modulus: float
-    poisson_ratio: float
-    biot_coefficient: float
-    density: float
+    young_modulus: float | FieldRef
+    poisson_ratio: float | FieldRef
+    biot_coefficient: float | FieldRef
+    density: float | FieldRef
 
 
 @dataclass(frozen=True)
@@ -154,6 +157,7 @@ def check_ground_surface(reader: OptionReader, settings: Settings, surface_names
 
 
 def read_materials(reader: OptionReader, names: Iterable[str]) -> list[Material]:
+    """The materials' properties; a number is checked here, a field's values when its file is read."""
     mats = []
     for name in names:
         p = f"pfault_material_{name}_"
@@ -163,15 +167,15 @@ def read_materials(reader: OptionReader, names: Iterable[str]) -> list[Material]
             raise InputError(f"missing -{p}young_modulus (Pa) for physical volume '{name}'")
         if nu is None:
             raise InputError(f"missing -{p}poisson_ratio for physical volume '{name}'")
-        if not e > 0:
+        if not is_field(e) and not e > 0:
             raise InputError(f"-{p}young_modulus: must be positive, got {e}")
-        if not -1.0 < nu < 0.5:
+        if not is_field(nu) and not -1.0 < nu < 0.5:
             raise InputError(f"-{p}poisson_ratio: must lie in (-1, 0.5), got {nu}")
         alpha = reader.get(p + "biot_coefficient")
-        if not 0.0 <= alpha <= 1.0:
+        if not is_field(alpha) and not 0.0 <= alpha <= 1.0:
             raise InputError(f"-{p}biot_coefficient: must lie in [0, 1], got {alpha}")
         rho = reader.get(p + "density")
-        if rho <= 0:
+        if not is_field(rho) and not rho > 0:
             raise InputError(f"-{p}density: must be positive, got {rho}")
         mats.append(Material(name, e, nu, alpha, rho))
     return mats

@@ -47,7 +47,7 @@ class Simulation:
 
     def setup(self) -> None:
         self.costs = EffectCosts(self.comm)
-        observed = read_observation_settings(self.reader)      # before build_model checks the -pfault_ options
+        observed = read_observation_settings(self.reader, self.options_file)      # before build_model checks the -pfault_ options
         self.model = m = build_model(self.comm, self.reader, self.options_file)
         self.observations = Observations.locate(m, observed)
         self.wall.update(m.wall)

@@ -14,22 +14,19 @@ from ..physics import elasticity as el
 if TYPE_CHECKING:
     from ..fields import DofMap
     from ..mesh.distributed import LocalMesh
-    from ..scene import Material
+    from ..properties import CellProperties
 
 CHUNK = 4096     # cells per kernel batch: element matrices of a batch stay in cache
 
 
 class ElasticAssembler:
-    def __init__(self, mesh: LocalMesh, dofmap: DofMap, materials: Sequence[Material]) -> None:
+    def __init__(self, mesh: LocalMesh, dofmap: DofMap, props: CellProperties) -> None:
+        """``props``: the material properties of the local cells."""
         self.mesh = mesh
         self.dofmap = dofmap
-        self.materials = materials
-        mat = mesh.cell_material
-        young = np.array([m.young_modulus for m in materials])[mat]
-        nu = np.array([m.poisson_ratio for m in materials])[mat]
-        self.lam, self.mu = el.lame(young, nu)
-        self.alpha = np.array([m.biot_coefficient for m in materials])[mat]
-        self.density = np.array([m.density for m in materials])[mat]
+        self.lam, self.mu = el.lame(props.young_modulus, props.poisson_ratio)
+        self.alpha = props.biot_coefficient
+        self.density = props.density
         self.grad, self.vol = el.tet_geometry(mesh.coords[mesh.cells])
         if len(self.vol) and self.vol.min() <= 0:
             raise RuntimeError("inverted tetrahedron after distribution")

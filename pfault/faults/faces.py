@@ -24,10 +24,11 @@ ADD = PETSc.InsertMode.ADD_VALUES
 class FaultFaces:
     """The owned fault faces (serial ids ``face``, ordered; ``nf`` of ``nf_total``): minus cell and local face,
     vertices, area, unit normal (minus -> plus) and local frames ``R``, the fault of each face and whether it is a
-    Lagrange face, the modulus of the minus cell, the displacement dofs of both sides (local ``u_dofs``, global
-    ``g_u``) and the multiplier dofs (``lm_dofs``, ``g_lm``; -1 on penalty faces)."""
+    Lagrange face, the Young's modulus of the minus cell (from ``young``, per local cell), the displacement dofs of
+    both sides (local ``u_dofs``, global ``g_u``) and the multiplier dofs (``lm_dofs``, ``g_lm``; -1 on penalty
+    faces)."""
 
-    def __init__(self, mesh: Any, dofmap: Any, settings: list, fault_id: np.ndarray, materials: list,
+    def __init__(self, mesh: Any, dofmap: Any, settings: list, fault_id: np.ndarray, young: np.ndarray,
                  bc_local: np.ndarray, lgmap: Any) -> None:
         self.settings = settings
         self.mpi = mesh.dm.getComm().tompi4py()
@@ -47,7 +48,7 @@ class FaultFaces:
         self.lagrange = np.array([s.method == "lagrange" for s in settings])[self.fault]
         self.has_lagrange = any(s.method == "lagrange" for s in settings)
         self.h = np.sqrt(self.area)
-        self.young = np.array([m.young_modulus for m in materials])[mesh.cell_material[self.cell]]
+        self.young = young[self.cell]
         self._dofs(mesh, dofmap, bc_local, lgmap, fault_id)
         self._setup_gather()
         self.pos = np.full(self.nf_total, -1)       # owned index of each serial face (-1: another rank's)

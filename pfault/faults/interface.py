@@ -34,12 +34,11 @@ class FaultTopology:
     young: np.ndarray
 
 
-def fault_topology(serial, split, materials):
-    """FaultTopology of the split faces of the serial mesh (rank 0)."""
+def fault_topology(serial, split, young, nu):
+    """FaultTopology of the split faces of the serial mesh (rank 0); ``young``, ``nu``: per serial cell."""
     from .stabilization import stabilization_pairs
-    pairs, S = stabilization_pairs(serial, split, materials)
-    e = np.array([m.young_modulus for m in materials])
-    e_minus, e_plus = e[serial.cell_material[split.minus_cell]], e[serial.cell_material[split.plus_cell]]
+    pairs, S = stabilization_pairs(serial, split, young, nu)
+    e_minus, e_plus = young[split.minus_cell], young[split.plus_cell]
     return FaultTopology(split.fault_id, pairs, S, 2.0 * e_minus * e_plus / (e_minus + e_plus))
 
 

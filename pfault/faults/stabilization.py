@@ -9,7 +9,6 @@ state constrains: all three of a stuck face, the normal one of a slipping face, 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -20,7 +19,6 @@ from . import contact as ct
 if TYPE_CHECKING:
     from ..mesh.fault import FaultSplit
     from ..mesh.serial import SerialMesh
-    from ..scene import Material
 
 # S as a fraction of the local compliance estimate. The stabilisation is a consistency error: a closed face
 # next to a face whose traction changed differently takes a jump S (dt_b - dt_a) / A, so near an opening front
@@ -35,7 +33,7 @@ if TYPE_CHECKING:
 COMPLIANCE_FRACTION = 0.01
 
 
-def stabilization_pairs(serial: SerialMesh, split: FaultSplit, materials: Sequence[Material],
+def stabilization_pairs(serial: SerialMesh, split: FaultSplit, young: np.ndarray, nu: np.ndarray,
                         fraction: float = COMPLIANCE_FRACTION) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of fault faces sharing an edge and their stabilisation matrices (local frame).
 
@@ -43,7 +41,8 @@ def stabilization_pairs(serial: SerialMesh, split: FaultSplit, materials: Sequen
     fault edge, S = fraction R (K_-^-1 + K_+^-1) R^T * areafac, with K_+- a diagonal stiffness estimate of
     the edge nodes on each side (sum over the two faces' adjacent cells of
     E/((1+nu)(1-2nu)) 2/9 (2-3nu) V/box_j^2) and areafac = sum over the edge nodes of the products
-    of the faces' nodal areas; ``fraction``: see COMPLIANCE_FRACTION. No user coefficient.
+    of the faces' nodal areas; ``young``, ``nu``: per serial cell; ``fraction``: see COMPLIANCE_FRACTION. No
+    user coefficient.
     """
     faces = split.faces
     nf = len(faces)
@@ -65,8 +64,6 @@ def stabilization_pairs(serial: SerialMesh, split: FaultSplit, materials: Sequen
     f1 = owner[order[first[two] + 1]]
     keep = split.fault_id[f0] == split.fault_id[f1]
     f0, f1 = f0[keep], f1[keep]
-    young = np.array([m.young_modulus for m in materials])[serial.cell_material]
-    nu = np.array([m.poisson_ratio for m in materials])[serial.cell_material]
     x = serial.points[serial.tets]
     vol = np.abs(el.tet_geometry(x)[1])
     box = x.max(axis=1) - x.min(axis=1)

@@ -356,23 +356,9 @@ def _nice_levels(vmin, vmax, n=20):
     return MaxNLocator(nbins=n).tick_values(vmin, vmax)
 
 
-def subsidence_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
-    """Land subsidence map (and the drawdown map of flow scenes) at one output time, with a subsidence profile
-    along x through the point of largest subsidence; returns the PNG path."""
-    plt = _pyplot()
-    from matplotlib.tri import Triangulation
-    snap = read_fields(run_dir, step)
-    pts, tets = snap.points, snap.cells
-    sub = -snap.point_data["displacement"][:, 2]
-    top = top_surface(pts, tets)
-    on_top = np.unique(top)
-    options = read_options(run_dir)
-    wells = wells_from_options(options)
-    trace = _fault_trace(run_dir, pts[:, 2].max())
-    head = snap.point_data.get("head_change")
-    scene = _scene(run_dir)
-    km = 1e-3
-    ncol = 2 if head is not None else 1
+def _map_layout(plt, pts, ncol):
+    """The figure: ``ncol`` maps, and the profile beside them (a domain long in y) or below; returns the figure,
+    its grid and the profile's place."""
     lx, ly = np.ptp(pts[:, 0]), np.ptp(pts[:, 1])
     map_h = min(max(5.2 * ly / lx, 4.2), 8.5)
     tall = ly > 1.5 * lx            # profile beside the map(s) rather than below
@@ -384,53 +370,47 @@ def subsidence_figure(run_dir: str, out: str | None = None, step: int = -1) -> s
         fig = plt.figure(figsize=(6.4 * ncol, map_h + 3.2), constrained_layout=True)
         gs = fig.add_gridspec(2, ncol, height_ratios=[map_h, 2.6])
         prof_spec = gs[1, :]
+    return fig, gs, prof_spec
 
-    def decorate(ax):
-        if trace is not None:
-            ax.plot(trace[:, 0] * km, trace[:, 1] * km, "w-", lw=2.2)
-            ax.plot(trace[:, 0] * km, trace[:, 1] * km, "k--", lw=1.0, label="fault trace")
-        if len(wells):
-            ax.plot(wells[:, 0] * km, wells[:, 1] * km, "v", ms=7, mfc="white", mec="black", label="wells")
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (km)")
-        ax.set_ylabel("y (km)")
-        if trace is not None or len(wells):
-            ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
 
-    ax = fig.add_subplot(gs[0, 0])
-    tri = Triangulation(pts[:, 0] * km, pts[:, 1] * km, top)
-    imax = on_top[int(np.argmax(sub[on_top]))]
-    smax = float(sub[imax])
-    levels = _nice_levels(min(0.0, float(np.min(sub[on_top]))), smax)
-    cf = ax.tricontourf(tri, sub, levels=levels, cmap="YlOrRd")
-    ax.tricontour(tri, sub, levels=levels[::2], colors="k", linewidths=0.4, alpha=0.5)
+def _decorate_map(ax, trace, wells, km):
+    """The fault trace and the wells on a map, its aspect, axes and legend."""
+    if trace is not None:
+        ax.plot(trace[:, 0] * km, trace[:, 1] * km, "w-", lw=2.2)
+        ax.plot(trace[:, 0] * km, trace[:, 1] * km, "k--", lw=1.0, label="fault trace")
+    if len(wells):
+        ax.plot(wells[:, 0] * km, wells[:, 1] * km, "v", ms=7, mfc="white", mec="black", label="wells")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (km)")
+    ax.set_ylabel("y (km)")
+    if trace is not None or len(wells):
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+
+
+def _contour_map(fig, ax, tri, values, cmap, label):
+    """Filled contours of ``values`` on ``tri`` from min(0, smallest) to the largest, with its colour bar."""
+    levels = _nice_levels(min(0.0, float(np.min(values))), float(np.max(values)))
+    cf = ax.tricontourf(tri, values, levels=levels, cmap=cmap)
+    ax.tricontour(tri, values, levels=levels[::2], colors="k", linewidths=0.4, alpha=0.5)
     cb = fig.colorbar(cf, cax=ax.inset_axes([1.03, 0.0, 0.04, 1.0]))
-    cb.set_label("subsidence -u_z (m)")
-    y0 = float(pts[imax, 1])
-    ax.axhline(y0 * km, color="tab:blue", lw=0.8, ls=":", label="profile")
-    ax.set_title(f"{scene}: land subsidence, max {smax:.3g} m\n{_title_time(snap.time)}")
-    decorate(ax)
+    cb.set_label(label)
 
-    if head is not None:
-        ax = fig.add_subplot(gs[0, 1])
-        dd = -head
-        zl, layer = _layer_with_largest(pts, dd)
-        xy, idx = np.unique(np.round(pts[layer, :2], 6), axis=0, return_index=True)
-        d = dd[np.flatnonzero(layer)[idx]]
-        tri2 = Triangulation(xy[:, 0] * km, xy[:, 1] * km)
-        dmax = float(d.max())
-        levels = _nice_levels(min(0.0, float(d.min())), dmax)
-        cf = ax.tricontourf(tri2, d, levels=levels, cmap="Blues")
-        ax.tricontour(tri2, d, levels=levels[::2], colors="k", linewidths=0.4, alpha=0.5)
-        cb = fig.colorbar(cf, cax=ax.inset_axes([1.03, 0.0, 0.04, 1.0]))
-        cb.set_label("drawdown (m of head)")
-        ax.set_title(f"drawdown at z = {zl:g} m (the node layer where it is largest), max {dmax:.3g} m\n"
-                     f"{_title_time(snap.time)}", fontsize=10)
-        decorate(ax)
 
-    # profile along x at the y of the largest subsidence (both sides of a fault trace are kept apart by the
-    # surface triangles; the interpolation picks one side exactly on the trace)
-    ax = fig.add_subplot(prof_spec)
+def _drawdown_map(fig, ax, pts, head, km):
+    """The drawdown on the horizontal node layer where it is largest; returns that layer's z and the largest
+    drawdown (m)."""
+    from matplotlib.tri import Triangulation
+    dd = -head
+    zl, layer = _layer_with_largest(pts, dd)
+    xy, idx = np.unique(np.round(pts[layer, :2], 6), axis=0, return_index=True)
+    d = dd[np.flatnonzero(layer)[idx]]
+    _contour_map(fig, ax, Triangulation(xy[:, 0] * km, xy[:, 1] * km), d, "Blues", "drawdown (m of head)")
+    return zl, float(d.max())
+
+
+def _profile(ax, pts, top, sub, y0, trace, wells, km):
+    """Subsidence along x at y0 (both sides of a fault trace are kept apart by the surface triangles; the
+    interpolation picks one side exactly on the trace), the fault trace dashed and the wells dotted."""
     x = np.linspace(pts[:, 0].min(), pts[:, 0].max(), 1201)
     prof = profile_along_x(pts, top, sub, x, y0)
     ax.plot(x * km, prof, color="tab:red")
@@ -447,6 +427,46 @@ def subsidence_figure(run_dir: str, out: str | None = None, step: int = -1) -> s
     ax.set_title(f"subsidence profile along y = {y0 * km:.3g} km (dashed: fault trace" +
                  (", dotted: wells)" if len(wells) else ")"), fontsize=10)
     ax.grid(alpha=0.3)
+
+
+def subsidence_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
+    """Land subsidence map (and the drawdown map of flow scenes) at one output time, with a subsidence profile
+    along x through the point of largest subsidence; returns the PNG path."""
+    plt = _pyplot()
+    from matplotlib.tri import Triangulation
+    snap = read_fields(run_dir, step)
+    pts, tets = snap.points, snap.cells
+    sub = -snap.point_data["displacement"][:, 2]
+    top = top_surface(pts, tets)
+    on_top = np.unique(top)
+    wells = wells_from_options(read_options(run_dir))
+    trace = _fault_trace(run_dir, pts[:, 2].max())
+    head = snap.point_data.get("head_change")
+    km = 1e-3
+    fig, gs, prof_spec = _map_layout(plt, pts, 2 if head is not None else 1)
+
+    ax = fig.add_subplot(gs[0, 0])
+    imax = on_top[int(np.argmax(sub[on_top]))]
+    smax = float(sub[imax])
+    levels = _nice_levels(min(0.0, float(np.min(sub[on_top]))), smax)
+    tri = Triangulation(pts[:, 0] * km, pts[:, 1] * km, top)
+    cf = ax.tricontourf(tri, sub, levels=levels, cmap="YlOrRd")
+    ax.tricontour(tri, sub, levels=levels[::2], colors="k", linewidths=0.4, alpha=0.5)
+    cb = fig.colorbar(cf, cax=ax.inset_axes([1.03, 0.0, 0.04, 1.0]))
+    cb.set_label("subsidence -u_z (m)")
+    y0 = float(pts[imax, 1])
+    ax.axhline(y0 * km, color="tab:blue", lw=0.8, ls=":", label="profile")
+    ax.set_title(f"{_scene(run_dir)}: land subsidence, max {smax:.3g} m\n{_title_time(snap.time)}")
+    _decorate_map(ax, trace, wells, km)
+
+    if head is not None:
+        ax = fig.add_subplot(gs[0, 1])
+        zl, dmax = _drawdown_map(fig, ax, pts, head, km)
+        ax.set_title(f"drawdown at z = {zl:g} m (the node layer where it is largest), max {dmax:.3g} m\n"
+                     f"{_title_time(snap.time)}", fontsize=10)
+        _decorate_map(ax, trace, wells, km)
+
+    _profile(fig.add_subplot(prof_spec), pts, top, sub, y0, trace, wells, km)
     out = out or os.path.join(run_dir, FIGURES[1])
     return _save(fig, out)
 
@@ -594,7 +614,7 @@ def write_run_figures(run_dir: str) -> list[str]:
         return []
 
 
-def main(argv=None):
+def main(argv: list[str] | None = None) -> int:
     """``python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]``: the figures of each run directory; exit
     code 1 when one is not a pfault run directory."""
     import argparse

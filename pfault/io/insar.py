@@ -19,6 +19,7 @@ displacement and velocity. A restart keeps the times of the run it continues up 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -117,7 +118,7 @@ def velocities(times: np.ndarray, maps: np.ndarray) -> np.ndarray:
     return rate
 
 
-def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps, times, maps: np.ndarray) -> None:
+def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int], times: Sequence[float], maps: np.ndarray) -> None:
     """``insar_los.nc`` (CF-1.8, NetCDF-4 through h5netcdf) with the given times, written into ``path``.tmp and
     renamed; its time dimension is unlimited (``append_netcdf``)."""
     import h5netcdf

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import run_on_root
+from ..paths import beside_scene
 from .insar import InsarObserver, InsarSettings, read_insar_settings
 from .insar import check_continuation as insar_continue
 from .probes import locate_pixels
@@ -25,8 +26,10 @@ class ObservationSettings:
     insar: InsarSettings | None     # -pfault_insar_los, -pfault_insar_spacing (None: no raster)
 
 
-def read_observation_settings(reader: Any) -> ObservationSettings:
-    return ObservationSettings(reader.get("pfault_stations"), read_insar_settings(reader))
+def read_observation_settings(reader: Any, scene_file: str = "") -> ObservationSettings:
+    """The observation options; a relative station file is taken from the working directory, else beside the
+    scene file (pfault.paths.beside_scene)."""
+    return ObservationSettings(beside_scene(reader.get("pfault_stations"), scene_file), read_insar_settings(reader))
 
 
 @dataclass(frozen=True)

@@ -10,12 +10,17 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from .serial import TET_FACES, face_keys
+
+if TYPE_CHECKING:
+    from .fault import FaultSplit
+    from .serial import SerialMesh
 
 # DMLabels on the mesh, named for what they hold; a scene has those that hold points. The mesh is not interpolated
 # (cells and vertices only): a face is local face k of a cell (opposite its local vertex k, serial.TET_FACES), and a
@@ -56,13 +61,13 @@ class LocalMesh:
     n_global_cells: int
 
     @property
-    def vert_data(self):
+    def vert_data(self) -> np.ndarray:
         """(nv, 4) per-vertex columns: constraint mask, ground-surface flag, displacement sides, displacement
         boundary (the layout readers of ``vert_data[:, 0]`` and ``vert_data[:, 1]`` expect)."""
         return np.column_stack([self.vert_constraint, self.vert_ground, self.vert_sides, self.vert_displacement_bc])
 
 
-def dual_graph(tets, nv):
+def dual_graph(tets: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray]:
     """Cells sharing a face, as CSR (row offsets, sorted columns) over the cells of ``tets``."""
     keys = face_keys(tets[:, TET_FACES].reshape(-1, 3), nv)
     order = np.argsort(keys)
@@ -131,14 +136,19 @@ def _set_partition(dm, tets, nv):
         obj.destroy()
 
 
-def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=None, split=None):
+def build(comm: PETSc.Comm, serial: SerialMesh | None, cell_face_tag: np.ndarray | None = None,
+          vert_constraint: np.ndarray | None = None, vert_ground: np.ndarray | None = None,
+          split: FaultSplit | None = None) -> LocalMesh:
     """Create, label, distribute and localise the mesh. ``serial`` and the per-entity arrays live on rank 0:
     ``cell_face_tag`` (nc, 4) boundary with tractions on each local face (-1: none), ``vert_constraint`` (nv,)
     constraint masks, ``vert_ground`` (nv,) ground-surface flags or (nv, 2) flags and prescribed-displacement
     boundaries (-1: none), ``split`` the faults' FaultSplit."""
     rank = comm.rank
     itype = PETSc.IntType
+    serial_tets = None
     if rank == 0:
+        assert serial is not None
+        serial_tets = serial.tets
         cells = serial.tets.astype(itype)
         coords = serial.points
         nc, nv = len(cells), len(coords)
@@ -158,7 +168,7 @@ def build(comm, serial, cell_face_tag=None, vert_constraint=None, vert_ground=No
         dm.createLabel(name)
         if rank == 0:
             _set_label(dm.getLabel(name), *labels[name])
-    _set_partition(dm, serial.tets if rank == 0 else None, nv)
+    _set_partition(dm, serial_tets, nv)
     migration = dm.distribute() if comm.size > 1 else None      # migrates the labels with their points
     return _localise(dm, migration, nc, nv, fault_keys)
 
@@ -313,11 +323,11 @@ def _gather(mesh, values, offset, count):
     return None
 
 
-def gather_vertex_values(mesh, values):
+def gather_vertex_values(mesh: LocalMesh, values: np.ndarray) -> np.ndarray | None:
     """Values per local vertex (nv, k) -> (n_global_vertices, k) in serial order on rank 0 (None elsewhere)."""
     return _gather(mesh, values, mesh.v_start, (mesh.n_global_cells, mesh.n_global_cells + mesh.n_global_vertices))
 
 
-def gather_cell_values(mesh, values):
+def gather_cell_values(mesh: LocalMesh, values: np.ndarray) -> np.ndarray | None:
     """Values per local cell (nc, k) -> (n_global_cells, k) in serial order on rank 0 (None elsewhere)."""
     return _gather(mesh, values, 0, (0, mesh.n_global_cells))

@@ -9,6 +9,7 @@ stays connected (the fault edge buried in the solid) is a *tip* and is not split
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,7 +36,7 @@ class FaultSplit:
     tip_vertices: np.ndarray  # sorted ids of fault vertices that are not split
 
     @property
-    def split_vertices(self):
+    def split_vertices(self) -> np.ndarray:
         return np.nonzero(self.vert_sides == 2)[0]
 
 
@@ -143,25 +144,10 @@ def _orient(points, nv, faces, fault_id, names):
     return flip ^ negative[cinv].astype(np.int64)
 
 
-def split_faults(mesh: SerialMesh, names) -> FaultSplit:
-    """Orient the named fault surfaces and decide which vertices split and which cells use the plus side."""
-    names = list(names)
-    if not names:
-        return _empty(mesh, names)
-    points = np.asarray(mesh.points, dtype=np.float64)
-    tets = np.asarray(mesh.tets, dtype=np.int64)
-    nv, nc = len(points), len(tets)
-    tris, fault_id, fkeys = _gather_triangles(mesh, names)
+def _two_cells(T, nv, tris, fault_id, names):
+    """Rule 1: every fault triangle is an interior face with exactly two tetrahedra (of the star ``T``); returns
+    the face, as seen from its first cell (its normal pointing into the second), and the two (cell, local face)."""
     nf = len(tris)
-
-    # the cells touching a fault vertex: everything below happens among them
-    is_fv = np.zeros(nv, bool)
-    is_fv[tris.ravel()] = True
-    star = np.flatnonzero(is_fv[tets].any(axis=1))
-    T = tets[star]
-    ns = len(star)
-
-    # rule 1: every fault triangle is an interior face with exactly two tetrahedra
     ti, cell, lface = locate_faces(T, nv, tris)
     cnt = np.bincount(ti, minlength=nf)
     if np.any(cnt != 2):
@@ -172,15 +158,14 @@ def split_faults(mesh: SerialMesh, names) -> FaultSplit:
                                         "embed the fault surface in the volume mesh (gmsh: mesh.embed / fragment)"))
     c0, l0, c1, l1 = cell[0::2], lface[0::2], cell[1::2], lface[1::2]   # grouped by triangle, two each
     faces = T[c0[:, None], TET_FACES[l0]]       # outward from c0: n points from c0 into c1
+    return faces, (c0, l0), (c1, l1)
 
-    # rule 2: orientation
-    flip = _orient(points, nv, faces, fault_id, names).astype(bool)
-    faces[flip] = faces[flip][:, [0, 2, 1]]
-    mc, ml = np.where(flip, c1, c0), np.where(flip, l1, l0)
-    pc, pl = np.where(flip, c0, c1), np.where(flip, l0, l1)
 
-    # rule 3: components of each fault vertex's star, connected through non-fault faces containing it.
-    # Nodes are (star cell s, local vertex k) -> 4*s + k; only those at fault vertices get edges.
+def _star_components(T, nv, is_fv, fkeys):
+    """Rule 3: the components of each fault vertex's star, connected through non-fault faces containing it.
+    Nodes are (star cell s, local vertex k) -> 4*s + k; only those at fault vertices get edges. Returns each
+    node's component label."""
+    ns = len(T)
     F = T[:, TET_FACES]                                  # (ns,4,3)
     fl = np.flatnonzero(is_fv[F].any(axis=2).ravel())    # faces with a fault vertex, index 4*s + lf
     fverts = F.reshape(-1, 3)[fl]
@@ -202,7 +187,13 @@ def split_faults(mesh: SerialMesh, names) -> FaultSplit:
     m = is_fv[va]
     na, nb = na[m], nb[m]
     label, _ = _components(4 * ns, np.r_[na, nb], np.r_[nb, na])
+    return label
 
+
+def _sides(T, nv, is_fv, label, minus, plus, fault_id, names):
+    """Which fault vertices split (two star components, the minus cells all in one of them) and which star nodes
+    use the plus side: (vert_sides (nv,), the plus-side star nodes 4*s + k)."""
+    ns = len(T)
     node_v = T.ravel()
     inc = np.flatnonzero(is_fv[node_v])                  # (vertex, cell) incidences at fault vertices
     iv, il = node_v[inc], label[inc]
@@ -211,6 +202,7 @@ def split_faults(mesh: SerialMesh, names) -> FaultSplit:
 
     # the component of the minus (plus) cells at each vertex
     big = np.iinfo(np.int64).max
+    (mc, ml), (pc, pl) = minus, plus
     mnode = (4 * mc[:, None] + TET_FACES[ml]).ravel()
     pnode = (4 * pc[:, None] + TET_FACES[pl]).ravel()
     mv, pv = node_v[mnode], node_v[pnode]
@@ -218,7 +210,7 @@ def split_faults(mesh: SerialMesh, names) -> FaultSplit:
     mlab_hi = np.full(nv, -1)
     _reduce(np.minimum, mlab_lo, mv, label[mnode])
     _reduce(np.maximum, mlab_hi, mv, label[mnode])
-    tri_of = np.repeat(np.arange(nf), 3)
+    tri_of = np.repeat(np.arange(len(mc)), 3)
 
     many = ncomp > 2
     if np.any(many):
@@ -235,11 +227,37 @@ def split_faults(mesh: SerialMesh, names) -> FaultSplit:
         raise InputError(_fault_message(names, fault_id[tri_of[bad]], f"{int(mixed.sum())} vertices where the "
                                         f"two sides of the fault cannot be told apart (surfaces touching); "
                                         f"{JUNCTION_FIX}"))
-
     vert_sides = np.ones(nv, np.int64)
     vert_sides[split] = 2
+    return vert_sides, inc[split[iv] & (il != mlab_lo[iv])]
+
+
+def split_faults(mesh: SerialMesh, names: Iterable[str]) -> FaultSplit:
+    """Orient the named fault surfaces and decide which vertices split and which cells use the plus side."""
+    names = list(names)
+    if not names:
+        return _empty(mesh, names)
+    points = np.asarray(mesh.points, dtype=np.float64)
+    tets = np.asarray(mesh.tets, dtype=np.int64)
+    nv, nc = len(points), len(tets)
+    tris, fault_id, fkeys = _gather_triangles(mesh, names)
+
+    # the cells touching a fault vertex: everything below happens among them
+    is_fv = np.zeros(nv, bool)
+    is_fv[tris.ravel()] = True
+    star = np.flatnonzero(is_fv[tets].any(axis=1))
+    T = tets[star]
+
+    faces, (c0, l0), (c1, l1) = _two_cells(T, nv, tris, fault_id, names)
+    # rule 2: orientation
+    flip = _orient(points, nv, faces, fault_id, names).astype(bool)
+    faces[flip] = faces[flip][:, [0, 2, 1]]
+    mc, ml = np.where(flip, c1, c0), np.where(flip, l1, l0)
+    pc, pl = np.where(flip, c0, c1), np.where(flip, l0, l1)
+
+    label = _star_components(T, nv, is_fv, fkeys)
+    vert_sides, plus = _sides(T, nv, is_fv, label, (mc, ml), (pc, pl), fault_id, names)
     cell_side = np.zeros((nc, 4), np.int64)
-    plus = inc[split[iv] & (il != mlab_lo[iv])]
     cell_side[star[plus // 4], plus % 4] = 1
 
     x = points[faces]
@@ -248,7 +266,7 @@ def split_faults(mesh: SerialMesh, names) -> FaultSplit:
     return FaultSplit(names=names, vert_sides=vert_sides, cell_side=cell_side, faces=faces, fault_id=fault_id,
                       minus_cell=star[mc], minus_lface=ml.astype(np.int64), plus_cell=star[pc],
                       plus_lface=pl.astype(np.int64), normal=cross / norm[:, None], area=0.5 * norm,
-                      tip_vertices=np.flatnonzero(is_fv & ~split))
+                      tip_vertices=np.flatnonzero(is_fv & (vert_sides == 1)))
 
 
 def _reduce(ufunc, out, idx, val):

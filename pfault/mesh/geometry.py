@@ -20,17 +20,20 @@ from __future__ import annotations
 
 import contextlib
 import math
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InputError
 from .gmsh_io import from_gmsh_model
+from .serial import SerialMesh
 
 # ------------------------------------------------------------------------------------------------------
 # Wuxi (Su-Xi-Chang, Jiangsu, China): earth fissure above a buried bedrock ridge
 # ------------------------------------------------------------------------------------------------------
 WUXI_SIZE = (2000.0, 5000.0, 250.0)           # Lx, Ly, depth (m)
-WUXI_DEFAULTS = dict(
+WUXI_DEFAULTS: dict[str, Any] = dict(
     ridge_x=1000.0,                  # x of the ridge crest line and of the fissure plane (m)
     crest_depth=5.0,                 # depth of the bedrock crest below the land surface (m)
     bedrock_depth=100.0,             # depth of the bedrock top away from the ridge (m)
@@ -48,7 +51,7 @@ _WUXI_H_MAX = 95.0
 # ------------------------------------------------------------------------------------------------------
 QUERETARO_SIZE = (30000.0, 30000.0, 50.0)     # Lx, Ly, depth (m)
 QUERETARO_WELLS = ((12000.0, 12000.0), (12000.0, 15000.0), (12000.0, 18000.0))
-QUERETARO_DEFAULTS = dict(
+QUERETARO_DEFAULTS: dict[str, Any] = dict(
     fault_x=10000.0,                 # x of the vertical fault plane; rock for x < fault_x (m)
     clay_thickness=20.0,             # clay aquitard 0..20 m over the sand aquifer 20..50 m (m)
     wells=QUERETARO_WELLS,           # (x, y) of the pumping wells (m); refinement only
@@ -169,12 +172,38 @@ def _physical(gmsh, dim, tags, name):
     gmsh.model.setPhysicalName(dim, tag, name)
 
 
+def _x_plane_surfaces(gmsh, x, tol, z_min=-math.inf):
+    """The model's surfaces in the plane x (above z_min)."""
+    found = []
+    for _, tag in gmsh.model.getEntities(2):
+        bb = gmsh.model.getBoundingBox(2, tag)
+        if abs(bb[0] - x) < tol and abs(bb[3] - x) < tol and bb[2] > z_min:
+            found.append(tag)
+    return found
+
+
+def _physical_surfaces(gmsh, groups, mesh_name):
+    """A physical surface per group {name: surface tags}, none of them empty."""
+    for name, tags in groups.items():
+        if not tags:
+            raise RuntimeError(f"{mesh_name}: no surface found for '{name}'")
+        _physical(gmsh, 2, tags, name)
+
+
+def _size_field(gmsh, expr):
+    """The element size everywhere: the MathEval expression ``expr`` of x, y, z (m)."""
+    field = gmsh.model.mesh.field.add("MathEval")
+    gmsh.model.mesh.field.setString(field, "F", expr)
+    gmsh.model.mesh.field.setAsBackgroundMesh(field)
+
+
 # ------------------------------------------------------------------------------------------------------
 # Wuxi
 # ------------------------------------------------------------------------------------------------------
-def wuxi_bedrock_top(x, ridge_x=WUXI_DEFAULTS["ridge_x"], crest_depth=WUXI_DEFAULTS["crest_depth"],
-                     bedrock_depth=WUXI_DEFAULTS["bedrock_depth"],
-                     ridge_half_width=WUXI_DEFAULTS["ridge_half_width"]):
+def wuxi_bedrock_top(x: ArrayLike, ridge_x: float = WUXI_DEFAULTS["ridge_x"],
+                     crest_depth: float = WUXI_DEFAULTS["crest_depth"],
+                     bedrock_depth: float = WUXI_DEFAULTS["bedrock_depth"],
+                     ridge_half_width: float = WUXI_DEFAULTS["ridge_half_width"]) -> np.ndarray:
     """Elevation z (m, negative) of the bedrock top at x: the piecewise-linear ridge profile."""
     x = np.asarray(x, dtype=float)
     slope = (bedrock_depth - crest_depth) / ridge_half_width
@@ -216,7 +245,7 @@ def _wuxi_params(params):
     return p
 
 
-def wuxi_mesh(size_factor=1.0, **params):
+def wuxi_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     """Earth fissure above a buried bedrock ridge (Wuxi, Su-Xi-Chang area, China).
 
     Domain 0 <= x <= 2000 m, 0 <= y <= 5000 m, -250 <= z <= 0. The geometry does not vary along y.
@@ -259,72 +288,78 @@ def wuxi_mesh(size_factor=1.0, **params):
     """
     f = _check_factor(size_factor)
     p = _wuxi_params(params)
-    lx, ly, depth = WUXI_SIZE
-    xr, c, d, w = p["ridge_x"], p["crest_depth"], p["bedrock_depth"], p["ridge_half_width"]
     with _gmsh_model("pfault_wuxi") as gmsh:
-        occ = gmsh.model.occ
-        # cross-section in the x-z plane (y = 0): bedrock polygon and layer strips minus the bedrock
-        rock = _polygon(occ, [(0.0, -depth), (lx, -depth), (lx, -d), (xr + w, -d), (xr, -c), (xr - w, -d),
-                              (0.0, -d)])
-        tops = (0.0,) + p["interfaces"]
-        bottoms = p["interfaces"] + (depth,)
-        faces = [(2, rock)]
-        for top, bottom in zip(tops, bottoms):
-            strip = _polygon(occ, [(0.0, -bottom), (lx, -bottom), (lx, -top), (0.0, -top)])
-            out, _ = occ.cut([(2, strip)], [(2, rock)], removeObject=True, removeTool=False)
-            faces += out
-        trace = occ.addLine(occ.addPoint(xr, 0.0, 0.0), occ.addPoint(xr, 0.0, -c))
-        faces, _ = occ.fragment(faces, [(1, trace)])
-        faces = [dt for dt in faces if dt[0] == 2]
-        out = occ.extrude(faces, 0.0, ly, 0.0)
-        vols = [dt for dt in out if dt[0] == 3]
-        occ.fragment(vols[:1], vols[1:])       # glue: faces shared by two volumes become one
-        occ.synchronize()
-
-        tol = 1e-6 * ly
-        materials = {"clay": [], "sand": [], "rock": []}
-        layer_names = ["clay" if i % 2 == 0 else "sand" for i in range(len(tops))]
-        for _, tag in gmsh.model.getEntities(3):
-            x, _, z = occ.getCenterOfMass(3, tag)
-            zb = wuxi_bedrock_top(x, xr, c, d, w)
-            if z < zb:
-                materials["rock"].append(tag)
-            else:
-                materials[layer_names[int(np.searchsorted(bottoms, -z))]].append(tag)
-        for name, tags in materials.items():
-            if tags:
-                _physical(gmsh, 3, tags, name)
-        groups = _outer_surfaces(gmsh, (0.0, 0.0, -depth, lx, ly, 0.0), tol)
-        fissure = []
-        for _, tag in gmsh.model.getEntities(2):
-            bb = gmsh.model.getBoundingBox(2, tag)
-            if abs(bb[0] - xr) < tol and abs(bb[3] - xr) < tol and bb[2] > -c - tol:
-                fissure.append(tag)
-        groups["fissure"] = fissure
-        for name, tags in groups.items():
-            if not tags:
-                raise RuntimeError(f"wuxi_mesh: no surface found for '{name}'")
-            _physical(gmsh, 2, tags, name)
-
-        # the fissure is meshed as a structured strip: segments of h along y (1876 triangles at size_factor 1
-        # as in the paper), as few rows down to the crest as keep the triangles near isotropic
-        h = _WUXI_H_FISSURE * f
-        for tag in fissure:
-            for _, curve in gmsh.model.getBoundary([(2, tag)], oriented=False):
-                bb = gmsh.model.getBoundingBox(1, curve)
-                length = max(bb[4] - bb[1], bb[5] - bb[2])
-                gmsh.model.mesh.setTransfiniteCurve(curve, max(1, int(round(length / h))) + 1)
-            gmsh.model.mesh.setTransfiniteSurface(tag)
-
-        # size field: grows with the distance (in the x-z plane) from the fissure segment, whose bottom end
-        # is the crest line
-        dist = f"Sqrt((x-{xr!r})*(x-{xr!r}) + Max(0,{-c!r}-z)*Max(0,{-c!r}-z))"
-        expr = f"{f!r}*Min({_WUXI_H_MAX!r}, {_WUXI_H_FISSURE!r} + {_WUXI_GROWTH!r}*{dist})"
-        field = gmsh.model.mesh.field.add("MathEval")
-        gmsh.model.mesh.field.setString(field, "F", expr)
-        gmsh.model.mesh.field.setAsBackgroundMesh(field)
+        _wuxi_volumes(gmsh.model.occ, p)
+        fissure = _wuxi_groups(gmsh, p)
+        _wuxi_sizes(gmsh, fissure, p, f)
         gmsh.model.mesh.generate(3)
         return from_gmsh_model(source="wuxi")
+
+
+def _wuxi_volumes(occ, p):
+    """The volumes: the cross-section in the x-z plane (y = 0), the bedrock polygon and the layer strips minus
+    the bedrock, cut by the fissure's trace, extruded along y and glued (faces shared by two volumes become
+    one)."""
+    lx, ly, depth = WUXI_SIZE
+    xr, c, d, w = p["ridge_x"], p["crest_depth"], p["bedrock_depth"], p["ridge_half_width"]
+    rock = _polygon(occ, [(0.0, -depth), (lx, -depth), (lx, -d), (xr + w, -d), (xr, -c), (xr - w, -d),
+                          (0.0, -d)])
+    tops = (0.0,) + p["interfaces"]
+    bottoms = p["interfaces"] + (depth,)
+    faces = [(2, rock)]
+    for top, bottom in zip(tops, bottoms):
+        strip = _polygon(occ, [(0.0, -bottom), (lx, -bottom), (lx, -top), (0.0, -top)])
+        out, _ = occ.cut([(2, strip)], [(2, rock)], removeObject=True, removeTool=False)
+        faces += out
+    trace = occ.addLine(occ.addPoint(xr, 0.0, 0.0), occ.addPoint(xr, 0.0, -c))
+    faces, _ = occ.fragment(faces, [(1, trace)])
+    faces = [dt for dt in faces if dt[0] == 2]
+    out = occ.extrude(faces, 0.0, ly, 0.0)
+    vols = [dt for dt in out if dt[0] == 3]
+    occ.fragment(vols[:1], vols[1:])       # glue: faces shared by two volumes become one
+    occ.synchronize()
+
+
+def _wuxi_groups(gmsh, p):
+    """Physical volumes (rock under the bedrock top, clay and sand layers above) and surfaces (the six sides, the
+    fissure); returns the fissure's surface tags."""
+    occ = gmsh.model.occ
+    lx, ly, depth = WUXI_SIZE
+    xr, c, d, w = p["ridge_x"], p["crest_depth"], p["bedrock_depth"], p["ridge_half_width"]
+    tol = 1e-6 * ly
+    bottoms = p["interfaces"] + (depth,)
+    materials = {"clay": [], "sand": [], "rock": []}
+    layer_names = ["clay" if i % 2 == 0 else "sand" for i in range(len(bottoms))]
+    for _, tag in gmsh.model.getEntities(3):
+        x, _, z = occ.getCenterOfMass(3, tag)
+        zb = wuxi_bedrock_top(x, xr, c, d, w)
+        if z < zb:
+            materials["rock"].append(tag)
+        else:
+            materials[layer_names[int(np.searchsorted(bottoms, -z))]].append(tag)
+    for name, tags in materials.items():
+        if tags:
+            _physical(gmsh, 3, tags, name)
+    groups = _outer_surfaces(gmsh, (0.0, 0.0, -depth, lx, ly, 0.0), tol)
+    groups["fissure"] = fissure = _x_plane_surfaces(gmsh, xr, tol, z_min=-c - tol)
+    _physical_surfaces(gmsh, groups, "wuxi_mesh")
+    return fissure
+
+
+def _wuxi_sizes(gmsh, fissure, p, f):
+    """Element sizes: the fissure a structured strip of segments of h along y (1876 triangles at size_factor 1,
+    as in the paper) with as few rows down to the crest as keep the triangles near isotropic; elsewhere a size
+    growing with the distance (in the x-z plane) from the fissure segment, whose bottom end is the crest line."""
+    h = _WUXI_H_FISSURE * f
+    for tag in fissure:
+        for _, curve in gmsh.model.getBoundary([(2, tag)], oriented=False):
+            bb = gmsh.model.getBoundingBox(1, curve)
+            length = max(bb[4] - bb[1], bb[5] - bb[2])
+            gmsh.model.mesh.setTransfiniteCurve(curve, max(1, int(round(length / h))) + 1)
+        gmsh.model.mesh.setTransfiniteSurface(tag)
+    xr, c = p["ridge_x"], p["crest_depth"]
+    dist = f"Sqrt((x-{xr!r})*(x-{xr!r}) + Max(0,{-c!r}-z)*Max(0,{-c!r}-z))"
+    _size_field(gmsh, f"{f!r}*Min({_WUXI_H_MAX!r}, {_WUXI_H_FISSURE!r} + {_WUXI_GROWTH!r}*{dist})")
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -362,7 +397,7 @@ def _queretaro_params(params):
     return p
 
 
-def queretaro_mesh(size_factor=1.0, **params):
+def queretaro_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     """Pre-existing fault bounding a pumped aquifer (Queretaro valley, Mexico).
 
     Domain 0 <= x, y <= 30 km, -50 <= z <= 0. For x < ``fault_x`` (10 km) the whole depth is ``rock``
@@ -385,51 +420,54 @@ def queretaro_mesh(size_factor=1.0, **params):
     """
     f = _check_factor(size_factor)
     p = _queretaro_params(params)
-    lx, ly, depth = QUERETARO_SIZE
-    xf, tc, wells = p["fault_x"], p["clay_thickness"], p["wells"]
-    ts = depth - tc
-    n_clay = max(1, int(round(tc / (_QRO_DZ * f))))
-    n_sand = max(1, int(round(ts / (_QRO_DZ * f))))
     with _gmsh_model("pfault_queretaro") as gmsh:
-        occ = gmsh.model.occ
-        rock = occ.addRectangle(0.0, 0.0, 0.0, xf, ly)
-        sed = occ.addRectangle(xf, 0.0, 0.0, lx - xf, ly)
-        top, _ = occ.fragment([(2, rock)], [(2, sed)])
-        top = sorted(dt for dt in top if dt[0] == 2)
-        out1 = occ.extrude(top, 0.0, 0.0, -tc, numElements=[n_clay], recombine=False)
-        mid = [out1[i - 1] for i, dt in enumerate(out1) if dt[0] == 3]
-        vols1 = [dt for dt in out1 if dt[0] == 3]
-        out2 = occ.extrude(mid, 0.0, 0.0, -ts, numElements=[n_sand], recombine=False)
-        vols2 = [dt for dt in out2 if dt[0] == 3]
-        occ.synchronize()
-
-        tol = 1e-6 * lx
-        materials = {"clay": [], "sand": [], "rock": []}
-        for _, tag in vols1 + vols2:
-            x, _, z = occ.getCenterOfMass(3, tag)
-            materials["rock" if x < xf else ("clay" if z > -tc else "sand")].append(tag)
-        for name, tags in materials.items():
-            _physical(gmsh, 3, tags, name)
-        groups = _outer_surfaces(gmsh, (0.0, 0.0, -depth, lx, ly, 0.0), tol)
-        fault = []
-        for _, tag in gmsh.model.getEntities(2):
-            bb = gmsh.model.getBoundingBox(2, tag)
-            if abs(bb[0] - xf) < tol and abs(bb[3] - xf) < tol:
-                fault.append(tag)
-        groups["fault"] = fault
-        for name, tags in groups.items():
-            if not tags:
-                raise RuntimeError(f"queretaro_mesh: no surface found for '{name}'")
-            _physical(gmsh, 2, tags, name)
-
+        volumes = _queretaro_volumes(gmsh.model.occ, p, f)
+        _queretaro_groups(gmsh, volumes, p)
+        xf = p["fault_x"]
         terms = [f"{_QRO_H_FAULT!r} + {_QRO_GROWTH!r}*Abs(x-{xf!r})"]
-        for wx, wy in wells:
+        for wx, wy in p["wells"]:
             terms.append(f"{_QRO_H_WELL!r} + {_QRO_GROWTH!r}*Sqrt((x-{wx!r})*(x-{wx!r})+(y-{wy!r})*(y-{wy!r}))")
         expr = f"{_QRO_H_MAX!r}"
         for t in terms:
             expr = f"Min({expr}, {t})"
-        field = gmsh.model.mesh.field.add("MathEval")
-        gmsh.model.mesh.field.setString(field, "F", f"{f!r}*{expr}")
-        gmsh.model.mesh.field.setAsBackgroundMesh(field)
+        _size_field(gmsh, f"{f!r}*{expr}")
         gmsh.model.mesh.generate(3)
         return from_gmsh_model(source="queretaro")
+
+
+def _queretaro_volumes(occ, p, f):
+    """The land surface (rock and sediment rectangles, fragmented along the fault's trace) extruded down through
+    the clay and then the sand, in layers; returns the volumes (dim, tag)."""
+    lx, ly, depth = QUERETARO_SIZE
+    xf, tc = p["fault_x"], p["clay_thickness"]
+    ts = depth - tc
+    n_clay = max(1, int(round(tc / (_QRO_DZ * f))))
+    n_sand = max(1, int(round(ts / (_QRO_DZ * f))))
+    rock = occ.addRectangle(0.0, 0.0, 0.0, xf, ly)
+    sed = occ.addRectangle(xf, 0.0, 0.0, lx - xf, ly)
+    top, _ = occ.fragment([(2, rock)], [(2, sed)])
+    top = sorted(dt for dt in top if dt[0] == 2)
+    out1 = occ.extrude(top, 0.0, 0.0, -tc, numElements=[n_clay], recombine=False)
+    mid = [out1[i - 1] for i, dt in enumerate(out1) if dt[0] == 3]
+    vols1 = [dt for dt in out1 if dt[0] == 3]
+    out2 = occ.extrude(mid, 0.0, 0.0, -ts, numElements=[n_sand], recombine=False)
+    vols2 = [dt for dt in out2 if dt[0] == 3]
+    occ.synchronize()
+    return vols1 + vols2
+
+
+def _queretaro_groups(gmsh, volumes, p):
+    """Physical volumes (rock west of the fault, clay over sand east of it) and surfaces (the six sides, the
+    fault)."""
+    lx, ly, depth = QUERETARO_SIZE
+    xf, tc = p["fault_x"], p["clay_thickness"]
+    tol = 1e-6 * lx
+    materials = {"clay": [], "sand": [], "rock": []}
+    for _, tag in volumes:
+        x, _, z = gmsh.model.occ.getCenterOfMass(3, tag)
+        materials["rock" if x < xf else ("clay" if z > -tc else "sand")].append(tag)
+    for name, tags in materials.items():
+        _physical(gmsh, 3, tags, name)
+    groups = _outer_surfaces(gmsh, (0.0, 0.0, -depth, lx, ly, 0.0), tol)
+    groups["fault"] = _x_plane_surfaces(gmsh, xf, tol)
+    _physical_surfaces(gmsh, groups, "queretaro_mesh")

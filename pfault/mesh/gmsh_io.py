@@ -7,6 +7,7 @@ faults), all addressed by their physical names.
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +17,8 @@ from .serial import SerialMesh, orient_positive
 TET4, TRI3 = 4, 2
 
 
-def read_msh(path):
+def read_msh(path: str) -> SerialMesh:
+    """The mesh of a gmsh file (MSH 4.1), its physical volumes the materials, its physical surfaces named."""
     if not os.path.isfile(path):
         raise InputError(f"-pfault_mesh_file: no such file '{path}'")
     import gmsh
@@ -38,7 +40,45 @@ def read_msh(path):
     return mesh
 
 
-def from_gmsh_model(source="gmsh model"):
+def _elements(gmsh: Any, lookup: np.ndarray, dim: int, tag: int, wanted: int, what: str, source: str) -> np.ndarray:
+    """The elements (as node indices) of physical group ``tag`` of dimension ``dim``, all of gmsh type ``wanted``."""
+    blocks = []
+    for ent in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+        types, _, nodes = gmsh.model.mesh.getElements(dim, ent)
+        for t, n in zip(types, nodes):
+            if t != wanted:
+                name = gmsh.model.mesh.getElementProperties(t)[0]
+                raise InputError(f"mesh {source}: {what} holds '{name}' elements; pfault needs linear "
+                                 f"{'tetrahedra' if dim == 3 else 'triangles'} (set Mesh.ElementOrder 1)")
+            blocks.append(lookup[np.asarray(n, dtype=np.int64)].reshape(-1, 4 if dim == 3 else 3))
+    return np.concatenate(blocks) if blocks else np.zeros((0, 4 if dim == 3 else 3), np.int64)
+
+
+def _volumes(gmsh: Any, lookup: np.ndarray, source: str) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """The named physical volumes: their names (the materials, in tag order), tetrahedra and material index."""
+    names: list[str] = []
+    tet_blocks: list[np.ndarray] = []
+    mat_blocks: list[np.ndarray] = []
+    for dim, tag in sorted(gmsh.model.getPhysicalGroups(3), key=lambda x: x[1]):
+        name = gmsh.model.getPhysicalName(dim, tag)
+        if not name:
+            raise InputError(f"mesh {source}: physical volume {tag} has no name; name it (materials are "
+                             "addressed by physical name)")
+        if name in names:
+            raise InputError(f"mesh {source}: two physical volumes are named '{name}'")
+        t = _elements(gmsh, lookup, dim, tag, TET4, f"physical volume '{name}'", source)
+        tet_blocks.append(t)
+        mat_blocks.append(np.full(len(t), len(names), dtype=np.int64))
+        names.append(name)
+    if not tet_blocks:
+        raise InputError(f"mesh {source}: no physical volumes; tag the volumes with named physical groups")
+    tets = np.concatenate(tet_blocks)
+    if np.any(tets < 0):
+        raise InputError(f"mesh {source}: elements refer to unknown nodes")
+    return names, tets, np.concatenate(mat_blocks)
+
+
+def from_gmsh_model(source: str = "gmsh model") -> SerialMesh:
     """SerialMesh from the mesh of the current gmsh model."""
     import gmsh
     node_tags, coords, _ = gmsh.model.mesh.getNodes()
@@ -48,43 +88,13 @@ def from_gmsh_model(source="gmsh model"):
     coords = np.asarray(coords, dtype=float).reshape(-1, 3)
     lookup = np.full(node_tags.max() + 1, -1, dtype=np.int64)
     lookup[node_tags] = np.arange(len(node_tags))
-
-    def elements(dim, tag, wanted, what):
-        blocks = []
-        for ent in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
-            types, _, nodes = gmsh.model.mesh.getElements(dim, ent)
-            for t, n in zip(types, nodes):
-                if t != wanted:
-                    name = gmsh.model.mesh.getElementProperties(t)[0]
-                    raise InputError(f"mesh {source}: {what} holds '{name}' elements; pfault needs linear "
-                                     f"{'tetrahedra' if dim == 3 else 'triangles'} (set Mesh.ElementOrder 1)")
-                blocks.append(lookup[np.asarray(n, dtype=np.int64)].reshape(-1, 4 if dim == 3 else 3))
-        return np.concatenate(blocks) if blocks else np.zeros((0, 4 if dim == 3 else 3), np.int64)
-
-    names, tets, mats = [], [], []
-    for dim, tag in sorted(gmsh.model.getPhysicalGroups(3), key=lambda x: x[1]):
-        name = gmsh.model.getPhysicalName(dim, tag)
-        if not name:
-            raise InputError(f"mesh {source}: physical volume {tag} has no name; name it (materials are "
-                             "addressed by physical name)")
-        if name in names:
-            raise InputError(f"mesh {source}: two physical volumes are named '{name}'")
-        t = elements(dim, tag, TET4, f"physical volume '{name}'")
-        tets.append(t)
-        mats.append(np.full(len(t), len(names), dtype=np.int64))
-        names.append(name)
-    if not tets:
-        raise InputError(f"mesh {source}: no physical volumes; tag the volumes with named physical groups")
-    tets = np.concatenate(tets)
-    if np.any(tets < 0):
-        raise InputError(f"mesh {source}: elements refer to unknown nodes")
-    mats = np.concatenate(mats)
+    names, tets, mats = _volumes(gmsh, lookup, source)
     surfaces = {}
     for dim, tag in gmsh.model.getPhysicalGroups(2):
         name = gmsh.model.getPhysicalName(dim, tag)
         if not name:
             raise InputError(f"mesh {source}: physical surface {tag} has no name; name it")
-        surfaces[name] = elements(dim, tag, TRI3, f"physical surface '{name}'")
+        surfaces[name] = _elements(gmsh, lookup, dim, tag, TRI3, f"physical surface '{name}'", source)
     # keep only the nodes used by tetrahedra
     used = np.unique(tets)
     renum = np.full(len(coords), -1, dtype=np.int64)

@@ -19,7 +19,8 @@ class SerialMesh:
     surfaces: dict = field(default_factory=dict)   # name -> (nf, 3) int64 vertex triples
     source: str = ""
 
-    def check(self):
+    def check(self) -> SerialMesh:
+        """The mesh itself, after checking it has tetrahedra and none is degenerate (InputError)."""
         from ..errors import InputError
         if self.tets.size == 0:
             raise InputError(f"mesh {self.source}: no tetrahedra in any physical volume")
@@ -29,12 +30,13 @@ class SerialMesh:
         return self
 
 
-def signed_volumes(points, tets):
+def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Signed volume of each tetrahedron: (x1 - x0) x (x2 - x0) . (x3 - x0) / 6."""
     x = points[tets]
     return np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0]) / 6.0
 
 
-def orient_positive(points, tets):
+def orient_positive(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """Return tets with vertices ordered so that every volume is positive."""
     tets = np.array(tets, dtype=np.int64, copy=True)
     neg = signed_volumes(points, tets) < 0
@@ -42,13 +44,13 @@ def orient_positive(points, tets):
     return tets
 
 
-def face_keys(tri, nv):
+def face_keys(tri: np.ndarray, nv: int) -> np.ndarray:
     """Order-independent integer key of each triangle (sorted vertex ids)."""
     s = np.sort(np.asarray(tri, dtype=np.int64), axis=1)
     return (s[:, 0] * nv + s[:, 1]) * nv + s[:, 2]
 
 
-def boundary_faces(tets, nv):
+def boundary_faces(tets: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray]:
     """Faces that belong to a single tetrahedron: (cell, local face) arrays."""
     faces = tets[:, TET_FACES].reshape(-1, 3)
     keys = face_keys(faces, nv)
@@ -58,7 +60,7 @@ def boundary_faces(tets, nv):
     return idx // 4, idx % 4
 
 
-def locate_faces(tets, nv, triangles):
+def locate_faces(tets: np.ndarray, nv: int, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each triangle, the (cell, local face) pairs that have it: returns arrays (tri, cell, lface)."""
     faces = tets[:, TET_FACES].reshape(-1, 3)
     keys = face_keys(faces, nv)

@@ -5,6 +5,12 @@ asks for and how many unknowns its mesh gives."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..faults.settings import FaultSettings
+
 AUTO = "auto"
 DIRECT = "mumps"
 ITERATIVE = "iterative"
@@ -22,7 +28,7 @@ ITERATIVE = "iterative"
 ITERATIVE_FROM_DOFS = 50_000
 
 
-def faults_need_direct(fault_settings):
+def faults_need_direct(fault_settings: Iterable[FaultSettings]) -> bool:
     """Whether a scene's faults rule out the iterative solver: a Lagrange fault without the traction-jump
     stabilisation has no 3x3 face block for the Schur fieldsplit to eliminate its multipliers with
     (pfault.solver.fieldsplit.FieldSplit). Penalty faults add no unknowns: with penalty faults only,
@@ -30,12 +36,13 @@ def faults_need_direct(fault_settings):
     return any(f.method == "lagrange" and not f.stabilization for f in fault_settings)
 
 
-def choose_solver(n_dofs, need_direct=False):
+def choose_solver(n_dofs: int, need_direct: bool = False) -> str:
     """DIRECT below ITERATIVE_FROM_DOFS global unknowns or where the faults need it, ITERATIVE from there."""
     return DIRECT if need_direct or n_dofs < ITERATIVE_FROM_DOFS else ITERATIVE
 
 
-def solver_file_name(requested, n_dofs, fault_settings, pc_type_given=False):
+def solver_file_name(requested: str, n_dofs: int, fault_settings: Iterable[FaultSettings],
+                     pc_type_given: bool = False) -> str:
     """The -pfault_solver value a run applies (a name for pfault.solver.setup.apply_solver_file): the one the
     user or the scene named, as it is; for ``auto`` the choice of ``choose_solver``, or none ("") when the user
     chose the preconditioner with -pc_type and named no solver file (PETSc's options then steer the solver

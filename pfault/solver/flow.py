@@ -79,37 +79,41 @@ def _as_well(w):
 
 @dataclass(frozen=True)
 class FlowSettings:
-    conductivity: np.ndarray      # (n_materials,) m/s
-    storage: np.ndarray           # (n_materials,) 1/m
+    conductivity: tuple           # per material: m/s, or a field (pfault.properties.FieldRef)
+    storage: tuple                # per material: 1/m, a field, or None: the default from the skeleton per cell
     wells: tuple
     fixed_head_surfaces: tuple
     substeps: int
+    void_ratio: tuple = ()        # per material: a number or a field (the default storage of a None entry)
 
 
 # -- options ---------------------------------------------------------------------------------------
 def read_flow_settings(reader: OptionReader, material_names: Sequence[str], materials: Sequence[Material],
                        surface_names: Collection[str], water_density: float, gravity: float) -> FlowSettings:
     """Flow inputs from -pfault_ options (call only when -pfault_flow is true); same verdict on every rank."""
-    cond, stor = [], []
+    from ..properties import is_field
+    cond, stor, voids = [], [], []
     for name, m in zip(material_names, materials):
         p = f"pfault_material_{name}_"
         k = reader.get(p + "hydraulic_conductivity")
         if k is None:
             raise InputError(f"missing -{p}hydraulic_conductivity (m/s) for physical volume '{name}' "
                              "(needed by -pfault_flow)")
-        if not k > 0:
+        if not is_field(k) and not k > 0:
             raise InputError(f"-{p}hydraulic_conductivity: must be positive, got {k}")
         e = reader.get(p + "void_ratio")
-        if not e > 0:
+        if not is_field(e) and not e > 0:
             raise InputError(f"-{p}void_ratio: must be positive, got {e}")
         ss = reader.get(p + "specific_storage")
-        if ss is None:
+        skeleton = (m.young_modulus, m.poisson_ratio, e, m.biot_coefficient)
+        if ss is None and not any(is_field(v) for v in skeleton):
             ss = float(fl.specific_storage(m.young_modulus, m.poisson_ratio, e, m.biot_coefficient,
                                            water_density, gravity))
-        elif not ss > 0:
+        elif ss is not None and not is_field(ss) and not ss > 0:
             raise InputError(f"-{p}specific_storage: must be positive, got {ss}")
         cond.append(k)
         stor.append(ss)
+        voids.append(e)
     xy = reader.get("pfault_flow_wells")
     screen = reader.get("pfault_flow_well_screen")
     rate = reader.get("pfault_flow_well_rate")
@@ -132,7 +136,7 @@ def read_flow_settings(reader: OptionReader, material_names: Sequence[str], mate
     substeps = reader.get("pfault_flow_substeps")
     if substeps < 1:
         raise InputError("-pfault_flow_substeps: need at least 1")
-    return FlowSettings(np.array(cond), np.array(stor), wells, surfaces, substeps)
+    return FlowSettings(tuple(cond), tuple(stor), wells, surfaces, substeps, tuple(voids))
 
 
 def fixed_head_vertices(serial: SerialMesh, surface_names: Iterable[str]) -> np.ndarray:
@@ -146,67 +150,36 @@ def fixed_head_vertices(serial: SerialMesh, surface_names: Iterable[str]) -> np.
 
 
 # -- the model -------------------------------------------------------------------------------------
-class GroundwaterFlow:
-    """P1 transient flow on a LocalMesh; the mechanics read it through pfault.sources.FlowSource.
+TIME_RTOL = 1e-12       # two times closer than this (relative; absolute near 0 s) are the same time
 
-    mesh: LocalMesh; conductivity, storage: (nc,) per local cell (m/s, 1/m) or scalars; wells: Wells or
-    tuples (x, y, z_top, z_bottom, rate), rate a callable Q(t) or a constant (m**3/s, positive is pumping,
-    evaluated at the end of each step); fixed_head: (nv,) bool per local vertex (h = 0 there);
-    substeps: backward-Euler steps per ``advance_to`` call; lumped_mass: lumped instead of consistent
-    storage matrix; prefix: options prefix of the KSP.
 
-    After construction: ``advance_to(t)``, ``step(dt)``, ``cell_dp()`` (dp per local cell at ``time``, Pa), ``vertex_head()`` (h per local vertex, m), ``time``, ``history`` (one record
-    per step: time_s, dt_s, ksp_its, reason), ``dm`` / ``h`` (the head DM and global Vec), ``destroy()``.
-    """
+def after(t: float, now: float) -> bool:
+    """Whether time ``t`` lies after ``now`` by more than TIME_RTOL (s)."""
+    return t > now + TIME_RTOL * max(abs(t), abs(now), 1.0)
 
-    def __init__(self, mesh: LocalMesh, conductivity: float | np.ndarray, storage: float | np.ndarray,
-                 wells: Iterable[Well | tuple] = (), fixed_head: np.ndarray | None = None, substeps: int = 1,
-                 water_density: float = 1000.0, gravity: float = 9.80665, lumped_mass: bool = False,
-                 prefix: str = "flow_", t0: float = 0.0) -> None:
+
+class HeadGrid:
+    """The head's discrete space on a LocalMesh: a clone of the mesh DM (``dm``) with a scalar section, one dof
+    per vertex (the local dof of a vertex is its local vertex index), and its fixed-head rows (``fixed_owned``:
+    owned local dofs, ``fixed_rows``: their global rows)."""
+
+    def __init__(self, mesh: LocalMesh, fixed_head: np.ndarray | None = None) -> None:
         self.mesh = mesh
         self.comm = mesh.dm.getComm()
-        self.wells = tuple(_as_well(w) for w in wells)
-        self.substeps = int(substeps)
-        self.rho_g = water_density * gravity
-        self.prefix = prefix
-        self.time = float(t0)
-        self.history: list[dict[str, Any]] = []
-        self._dt: float | None = None
-        self.log_assembly = PETSc.Log.Event("pfaultFlowAssemble")
-        self.log_solve = PETSc.Log.Event("pfaultFlowSolve")
-        nc, nv = len(mesh.cells), len(mesh.coords)
-        conductivity = np.broadcast_to(np.asarray(conductivity, float), (nc,))
-        storage = np.broadcast_to(np.asarray(storage, float), (nc,))
-
+        nv = len(mesh.coords)
         self.dm = mesh.dm.clone()
         self.dm.setName("head_mesh")
         self.section = self._scalar_section(nv)
         self.dm.setSection(self.section)
-
-        self.log_assembly.begin()
-        grad, vol = fl.tet_geometry(mesh.coords[mesh.cells])
         self.cells = mesh.cells.astype(PETSc.IntType)
-        self.A = self._assemble(fl.conductivity(grad, vol, conductivity))
-        self.M = self._assemble(fl.mass(vol, storage, lumped=lumped_mass))
-        self.J = self.dm.createMatrix()
-        self.J.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
-        self.log_assembly.end()
-
-        self.h = self.dm.createGlobalVec()
-        self.h.setName(HEAD)
-        self.b = self.h.duplicate()
-        self.h_local = np.zeros(nv)
         fixed = np.zeros(nv, bool) if fixed_head is None else np.asarray(fixed_head, bool)
-        g = self._to_global(fixed.astype(float), PETSc.InsertMode.INSERT_VALUES)
+        g = self.to_global(fixed.astype(float), PETSc.InsertMode.INSERT_VALUES)
         start, _ = g.getOwnershipRange()
-        self.bc_local_owned = np.nonzero(g.getArray() > 0.5)[0].astype(PETSc.IntType)
-        self.bc_rows = self.bc_local_owned + start
+        self.fixed_owned = np.nonzero(g.getArray() > 0.5)[0].astype(PETSc.IntType)
+        self.fixed_rows = self.fixed_owned + start
         g.destroy()
-        self.well_loads = [self._well_load(w, grad, vol, conductivity) for w in self.wells]
-        self.ksp = self._create_ksp()
 
-    # -- setup -------------------------------------------------------------------------------------
-    def _scalar_section(self, nv):
+    def _scalar_section(self, nv: int) -> PETSc.Section:
         sec = PETSc.Section().create(comm=self.comm)
         sec.setNumFields(1)
         sec.setFieldName(0, HEAD)
@@ -222,7 +195,8 @@ class GroundwaterFlow:
             assert sec.getOffset(self.mesh.v_start) == 0 and sec.getOffset(self.mesh.v_start + nv - 1) == nv - 1
         return sec
 
-    def _assemble(self, ke):
+    def assemble(self, ke: np.ndarray) -> PETSc.Mat:
+        """The matrix of the (nc, 4, 4) element matrices ``ke``."""
         mat = self.dm.createMatrix()
         mat.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         mat.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
@@ -234,7 +208,8 @@ class GroundwaterFlow:
         mat.assemble()
         return mat
 
-    def _to_global(self, local_array, mode=PETSc.InsertMode.ADD_VALUES):
+    def to_global(self, local_array: np.ndarray, mode: PETSc.InsertMode = PETSc.InsertMode.ADD_VALUES) -> PETSc.Vec:
+        """A new global Vec of per-local-vertex values (added over ranks, or inserted)."""
         lv = self.dm.getLocalVec()
         lv.setArray(local_array)
         g = self.dm.createGlobalVec()
@@ -242,10 +217,40 @@ class GroundwaterFlow:
         self.dm.restoreLocalVec(lv)
         return g
 
-    def _well_load(self, well, grad, vol, conductivity):
-        """Global Vec of the load of a unit rate (sums to 1), K-weighted along the screen."""
-        x0 = self.mesh.coords[self.mesh.cells[:, 0]]
-        mpi = self.comm.tompi4py()
+    def to_local(self, g: PETSc.Vec) -> np.ndarray:
+        """The values of global Vec ``g`` at the local vertices (owned and ghost)."""
+        lv = self.dm.getLocalVec()
+        self.dm.globalToLocal(g, lv, addv=PETSc.InsertMode.INSERT_VALUES)
+        out = lv.getArray().copy()
+        self.dm.restoreLocalVec(lv)
+        return out
+
+    def set_global(self, local_array: np.ndarray, g: PETSc.Vec) -> None:
+        """Global Vec ``g`` set from per-local-vertex values."""
+        lv = self.dm.getLocalVec()
+        lv.setArray(local_array)
+        self.dm.localToGlobal(lv, g, addv=PETSc.InsertMode.INSERT_VALUES)
+        self.dm.restoreLocalVec(lv)
+
+    def destroy(self) -> None:
+        self.section.destroy()
+        self.dm.destroy()
+
+
+class WellLoads:
+    """The wells (``wells``) and the load of a unit rate of each (``loads``: global Vecs that sum to 1), spread
+    along its screen in proportion to K."""
+
+    def __init__(self, grid: HeadGrid, wells: Iterable[Well | tuple], grad: np.ndarray, vol: np.ndarray,
+                 conductivity: np.ndarray) -> None:
+        self.wells = tuple(_as_well(w) for w in wells)
+        self.loads = [self._load(grid, w, grad, vol, conductivity) for w in self.wells]
+
+    @staticmethod
+    def _load(grid, well, grad, vol, conductivity):
+        mesh = grid.mesh
+        x0 = mesh.coords[mesh.cells[:, 0]]
+        mpi = grid.comm.tompi4py()
         screen = well.z_top - well.z_bottom
         if not screen > 0:
             raise InputError(f"well at ({well.x:g}, {well.y:g}): screen top must lie above its bottom")
@@ -264,10 +269,70 @@ class GroundwaterFlow:
                              "screen must")
         wk = length * conductivity
         total_k = mpi.allreduce(float(wk.sum()), op=MPI.SUM)
-        loc = np.bincount(self.mesh.cells.ravel(), weights=(wk[:, None] * mid).ravel() / total_k,
-                          minlength=len(self.mesh.coords))
-        return self._to_global(loc)
+        loc = np.bincount(mesh.cells.ravel(), weights=(wk[:, None] * mid).ravel() / total_k,
+                          minlength=len(mesh.coords))
+        return grid.to_global(loc)
 
+    def subtract_from(self, b: PETSc.Vec, t: float) -> None:
+        """b -= sum of the wells' loads at their rates Q(t) (positive is pumping)."""
+        for well, load in zip(self.wells, self.loads):
+            b.axpy(-float(well.rate(t)), load)
+
+    def destroy(self) -> None:
+        for load in self.loads:
+            load.destroy()
+        self.loads = []
+
+
+class GroundwaterFlow:
+    """P1 transient flow on a LocalMesh; the mechanics read it through pfault.sources.FlowSource.
+
+    mesh: LocalMesh; conductivity, storage: (nc,) per local cell (m/s, 1/m) or scalars; wells: Wells or
+    tuples (x, y, z_top, z_bottom, rate), rate a callable Q(t) or a constant (m**3/s, positive is pumping,
+    evaluated at the end of each step); fixed_head: (nv,) bool per local vertex (h = 0 there);
+    substeps: backward-Euler steps per ``advance_to`` call; lumped_mass: lumped instead of consistent
+    storage matrix; prefix: options prefix of the KSP.
+
+    After construction: ``advance_to(t)``, ``step(dt)``, ``cell_dp()`` (dp per local cell at ``time``, Pa),
+    ``vertex_head()`` (h per local vertex, m), ``time``, ``history`` (one record per step: time_s, dt_s, ksp_its,
+    reason), ``grid`` (HeadGrid: the head's DM), ``wells`` (WellLoads), ``h`` (the head's global Vec),
+    ``destroy()``.
+    """
+
+    def __init__(self, mesh: LocalMesh, conductivity: float | np.ndarray, storage: float | np.ndarray,
+                 wells: Iterable[Well | tuple] = (), fixed_head: np.ndarray | None = None, substeps: int = 1,
+                 water_density: float = 1000.0, gravity: float = 9.80665, lumped_mass: bool = False,
+                 prefix: str = "flow_", t0: float = 0.0) -> None:
+        self.comm = mesh.dm.getComm()
+        self.substeps = int(substeps)
+        self.rho_g = water_density * gravity
+        self.prefix = prefix
+        self.time = float(t0)
+        self.history: list[dict[str, Any]] = []
+        self._dt: float | None = None
+        self.log_assembly = PETSc.Log.Event("pfaultFlowAssemble")
+        self.log_solve = PETSc.Log.Event("pfaultFlowSolve")
+        nc, nv = len(mesh.cells), len(mesh.coords)
+        conductivity = np.broadcast_to(np.asarray(conductivity, float), (nc,))
+        storage = np.broadcast_to(np.asarray(storage, float), (nc,))
+
+        self.grid = HeadGrid(mesh, fixed_head)
+        self.log_assembly.begin()
+        grad, vol = fl.tet_geometry(mesh.coords[mesh.cells])
+        self.A = self.grid.assemble(fl.conductivity(grad, vol, conductivity))
+        self.M = self.grid.assemble(fl.mass(vol, storage, lumped=lumped_mass))
+        self.J = self.grid.dm.createMatrix()
+        self.J.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+        self.log_assembly.end()
+
+        self.h = self.grid.dm.createGlobalVec()
+        self.h.setName(HEAD)
+        self.b = self.h.duplicate()
+        self.h_local = np.zeros(nv)
+        self.wells = WellLoads(self.grid, wells, grad, vol, conductivity)
+        self.ksp = self._create_ksp()
+
+    # -- setup -------------------------------------------------------------------------------------
     def _create_ksp(self):
         p = self.prefix
         opts = PETSc.Options()
@@ -287,7 +352,7 @@ class GroundwaterFlow:
         self.log_assembly.begin()
         self.A.copy(self.J, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self.J.axpy(1.0 / dt, self.M, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        self.J.zeroRowsColumns(self.bc_rows, diag=1.0)
+        self.J.zeroRowsColumns(self.grid.fixed_rows, diag=1.0)
         self.ksp.setOperators(self.J, self.J)
         self._dt = dt
         self.log_assembly.end()
@@ -295,7 +360,7 @@ class GroundwaterFlow:
     # -- time stepping ---------------------------------------------------------------------------------
     @property
     def active(self) -> bool:
-        return len(self.wells) > 0
+        return len(self.wells.wells) > 0
 
     def step(self, dt: float) -> None:
         """One backward-Euler step of length dt (s)."""
@@ -305,9 +370,8 @@ class GroundwaterFlow:
         self.log_solve.begin()
         self.M.mult(self.h, self.b)
         self.b.scale(1.0 / dt)
-        for well, load in zip(self.wells, self.well_loads):
-            self.b.axpy(-float(well.rate(t_new)), load)
-        self.b.getArray()[self.bc_local_owned] = 0.0
+        self.wells.subtract_from(self.b, t_new)
+        self.b.getArray()[self.grid.fixed_owned] = 0.0
         self.ksp.solve(self.b, self.h)
         self.log_solve.end()
         reason = self.ksp.getConvergedReason()
@@ -317,18 +381,14 @@ class GroundwaterFlow:
             raise FlowNotConverged(f"groundwater flow: KSP {self.prefix} did not converge at t = {t_new:g} s "
                                    f"(reason {reason})")
         self.time = t_new
-        lv = self.dm.getLocalVec()
-        self.dm.globalToLocal(self.h, lv, addv=PETSc.InsertMode.INSERT_VALUES)
-        self.h_local = lv.getArray().copy()
-        self.dm.restoreLocalVec(lv)
+        self.h_local = self.grid.to_local(self.h)
 
     def advance_to(self, t: float) -> None:
         """Take ``substeps`` equal backward-Euler steps from the current time to t (nothing if t is reached)."""
         t = float(t)
-        tol = 1e-12 * max(abs(t), abs(self.time), 1.0)
-        if t < self.time - tol:
+        if after(self.time, t):
             raise ValueError(f"groundwater flow is at t = {self.time:g} s and cannot go back to {t:g} s")
-        if t <= self.time + tol:
+        if not after(t, self.time):
             return
         t_start = self.time
         for k in range(1, self.substeps + 1):
@@ -345,19 +405,17 @@ class GroundwaterFlow:
         """Continue from a saved state (restart): head change h per local vertex (m, owned and ghost), the
         model time (s) and its step records."""
         self.h_local = np.array(h_local, dtype=float, copy=True)
-        lv = self.dm.getLocalVec()
-        lv.setArray(self.h_local)
-        self.dm.localToGlobal(lv, self.h, addv=PETSc.InsertMode.INSERT_VALUES)
-        self.dm.restoreLocalVec(lv)
+        self.grid.set_global(self.h_local, self.h)
         self.time = float(time)
         self.history = [dict(r) for r in history]
 
     def cell_dp(self) -> np.ndarray:
         """Pore-pressure change dp = rho_w g h (Pa) per local cell at the model's current time (``time``); h is
         the cell average of the P1 head."""
-        return self.rho_g * self.h_local[self.mesh.cells].mean(axis=1)
+        return self.rho_g * self.h_local[self.grid.mesh.cells].mean(axis=1)
 
     def destroy(self) -> None:
-        for obj in [self.ksp, self.A, self.M, self.J, self.h, self.b, *self.well_loads, self.section, self.dm]:
+        for obj in [self.ksp, self.A, self.M, self.J, self.h, self.b]:
             obj.destroy()
-        self.well_loads = []
+        self.wells.destroy()
+        self.grid.destroy()

@@ -109,9 +109,10 @@ class FactorReuse:
         kept factors."""
         now = time.perf_counter()
         if its == 0:
-            fresh = self._factoring is not None
-            if fresh:
-                self.t_factor = now - self._factoring
+            factoring = self._factoring
+            fresh = factoring is not None
+            if factoring is not None:
+                self.t_factor = now - factoring
                 self.null_pivots = mumps_null_pivots(ksp.getPC())
             self._factoring = None
             # Factors of a singular Jacobian (MUMPS fixes its null pivots: -mat_mumps_icntl_24 1) solve a

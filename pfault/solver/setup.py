@@ -4,21 +4,26 @@ from __future__ import annotations
 
 import os
 from importlib import resources
+from typing import TYPE_CHECKING
 
 import numpy as np
 from petsc4py import PETSc
 
 from ..errors import InputError
 
+if TYPE_CHECKING:
+    from ..fields import DofMap
+    from ..mesh.distributed import LocalMesh
 
-def set_default(name, value):
+
+def set_default(name: str, value: str) -> None:
     """Set an option only if the user did not (command line and options files win)."""
     opts = PETSc.Options()
     if not opts.hasName(name):
         opts.setValue(name, value)
 
 
-def read_options_file(path):
+def read_options_file(path: str) -> list[tuple[str, object]]:
     """(name, value) pairs of a PETSc options file, read strictly (pfault.optionsfile): a malformed solver file
     is an InputError naming the file and line."""
     from ..optionsfile import ArgumentError, read_options_file as read
@@ -28,7 +33,7 @@ def read_options_file(path):
         raise InputError(str(exc)) from None
 
 
-def find_solver_file(name, scene_file=""):
+def find_solver_file(name: str, scene_file: str = "") -> str:
     """The options file of ``-pfault_solver NAME``: NAME itself when it is a file, else ``solver/NAME.opts``
     beside the scene (a user's own solver file), else pfault's own ``NAME.opts`` (package data in
     pfault/solver/options, found through importlib.resources wherever pfault is installed)."""
@@ -46,7 +51,7 @@ def find_solver_file(name, scene_file=""):
                      f"pfault's solvers ({', '.join(known)})")
 
 
-def apply_solver_file(name, scene_file=""):
+def apply_solver_file(name: str, scene_file: str = "") -> str | None:
     """Options of a solver file, each set only where the user has not set it. A preconditioner the user
     chose (-pc_type, or -PREFIX_pc_type of a sub-solver such as -fieldsplit_displacement_pc_type) does not
     inherit the file's settings of the preconditioner it replaces: the file's options under that prefix that
@@ -80,12 +85,12 @@ _KSP_METHOD_KEYS = tuple(f"ksp_{m}_" for m in ("gmres", "fgmres", "lgmres", "dgm
                                                 "richardson", "bcgsl", "fcg", "pipefcg", "cg", "minres", "tfqmr"))
 
 
-def is_direct():
+def is_direct() -> bool:
     """The options ask for a direct factorisation as the preconditioner (-pc_type lu or cholesky)."""
     return PETSc.Options().getString("pc_type", "") in ("lu", "cholesky")
 
 
-def apply_solver_defaults(linear=False, penalty=False):
+def apply_solver_defaults(linear: bool = False, penalty: bool = False) -> None:
     """Code defaults, each only where the user is silent. A linear scene (no fault) needs one linear solve per
     step: SNES type ksponly. A fault scene runs Newton (newtonls) on the semismooth residual: full steps with
     Lagrange faces only, backtracking steps when a fault has penalty faces (``penalty``); its step-size test is
@@ -131,7 +136,7 @@ def apply_solver_defaults(linear=False, penalty=False):
     set_default("snes_max_it", "50")
 
 
-def rigid_body_modes(mesh, dofmap, dm):
+def rigid_body_modes(mesh: LocalMesh, dofmap: DofMap, dm: PETSc.DM) -> PETSc.NullSpace:
     """Orthonormal rigid-body modes of the displacement field (zero on multiplier dofs) as a NullSpace."""
     x = mesh.coords
     vecs = []

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 from mpi4py import MPI
 
+from ..solver.flow import after
+
 
 class TableSource:
     """dp(t) uniform within each material, from per-material tables (pfault.physics.loading.MaterialDrawdown)."""
@@ -74,8 +76,7 @@ class FlowSource:
         return self.flow.cell_dp()
 
     def advance_to(self, t: float) -> None:
-        tol = 1e-12 * max(abs(t), abs(self.flow.time), 1.0)
-        if t <= self.flow.time + tol:
+        if not after(t, self.flow.time):
             return
         self._before = (self.flow.time, self._current())
         self.flow.advance_to(t)
@@ -86,8 +87,7 @@ class FlowSource:
             t0, dp0 = self._before
             theta = (t - t0) / (now - t0)
             return (1.0 - theta) * dp0 + theta * self._current()
-        tol = 1e-12 * max(abs(t), abs(now), 1.0)
-        if abs(t - now) > tol:
+        if after(t, now) or after(now, t):
             raise ValueError(f"groundwater flow is at t = {now:g} s; its pore pressure at {t:g} s is not known")
         return self._current()
 

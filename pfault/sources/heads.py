@@ -23,7 +23,6 @@ I/O; it keeps nt x (its cells) values).
 
 from __future__ import annotations
 
-import os
 import re
 from dataclasses import dataclass
 from typing import Any
@@ -32,6 +31,7 @@ import numpy as np
 from mpi4py import MPI
 
 from ..errors import InputError, collective_check, run_on_all
+from ..paths import beside_scene
 from ..units import UNITS, parse_quantity
 
 OUTSIDE_ERROR, OUTSIDE_ZERO = "error", "zero"
@@ -73,22 +73,14 @@ def read_mesh_origin(reader: Any) -> tuple:
     return tuple(float(v) for v in origin)
 
 
-def _beside(path: str, scene_file: str) -> str:
-    """A file named relative to the working directory, or else to the scene file's directory."""
-    if not path or os.path.isabs(path) or os.path.exists(path) or not scene_file:
-        return path
-    other = os.path.join(os.path.dirname(scene_file), path)
-    return os.path.normpath(other) if os.path.exists(other) else path
-
-
 def read_heads_settings(reader: Any, water_density: float, gravity: float, origin: tuple = (0.0, 0.0, 0.0),
                         scene_file: str = "") -> HeadsSettings | None:
     """The settings of -pfault_heads_file, or None when it is not given (its companions are then unused). The
     files are found from the working directory or, failing that, beside the scene file."""
-    path = _beside(reader.get("pfault_heads_file"), scene_file)
+    path = beside_scene(reader.get("pfault_heads_file"), scene_file)
     if not path:
         return None
-    grid = _beside(reader.get("pfault_heads_grid"), scene_file)
+    grid = beside_scene(reader.get("pfault_heads_grid"), scene_file)
     if not grid and not re.search(r"\.(h5|hdf5|nc|nc4|cdf)$", path, re.IGNORECASE):
         raise InputError(f"-pfault_heads_file {path}: a MODFLOW head file needs its binary grid file, "
                          "-pfault_heads_grid MODEL.dis.grb (or .disv.grb); an HDF5/NetCDF-4 file ends in .h5 or .nc")

@@ -6,7 +6,7 @@ Parameter file (CSV, one parameter a line, ``#`` comments), as PEST's parameter 
     E_clay,-pfault_material_clay_young_modulus,10*MPa,1*MPa,100*MPa,log,
     Q,-pfault_flow_well_rate,2*L/s,0.5*L/s,20*L/s,none,"0:{Q},120*day:{Q}"
 
-- ``option``: a numeric ``-pfault_`` option (a real or a quantity), or a table or list option with a
+- ``option``: a numeric ``-pfault_`` option (a real, a quantity, or a material property given as a number), or a table or list option with a
   ``value`` template in which ``{name}`` stands for the parameter (in SI units), e.g. a pumping rate;
 - ``start``, ``lower``, ``upper``: numbers in SI units, or with a unit as in a scene (``10*MPa``);
 - ``transform``: ``log`` (fitted as log10 of the value, as PEST's PARTRANS log; the default for options in
@@ -34,9 +34,10 @@ import numpy as np
 from ..errors import InputError
 from ..optionsfile import ArgumentError, read_options_file
 from ..options import spec_for
+from ..paths import beside_scene
 from ..units import parse_list, parse_quantity, parse_table
 
-NUMERIC_KINDS = ("real", "quantity")
+NUMERIC_KINDS = ("real", "quantity", "property")    # property: a material property given as a number
 TEMPLATE_KINDS = ("table", "list")
 KIND_WORDS = {"string": "a text", "choice": "one of a few words", "bool": "true or false", "names": "names",
               "int": "a whole number", "ints": "whole numbers", "table": "a table", "list": "a list"}
@@ -236,6 +237,7 @@ def scene_facts(scene: str) -> SceneFacts:
     if not station_file:
         raise CalibrationInputError(f"scene {scene}: no -pfault_stations; add the stations the observations "
                                     "name (a CSV file name,x,y,z) to the scene")
+    station_file = beside_scene(station_file, scene)          # as pfault finds it (pfault.paths)
     stations = station_names(station_file, scene)
     try:
         time_end = parse_quantity(entries.get("pfault_time_end") or str(spec_for("pfault_time_end").default),
@@ -252,7 +254,7 @@ def station_names(path: str, scene: str) -> list[str]:
     runs; that module is not imported here: it starts PETSc)."""
     if not os.path.isfile(path):
         raise CalibrationInputError(f"scene {scene}: -pfault_stations {path}: no such file; give the scene's "
-                                    "station file (paths are relative to the directory pfault runs in)")
+                                    "station file (a path from the directory pfault runs in, or beside the scene)")
     with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
         lines = [line for line in fh.read().splitlines() if line.strip() and not line.lstrip().startswith("#")]
     first = lines[0] if lines else ""

@@ -90,7 +90,8 @@ def write_runs(out: str, problem: Problem) -> None:
 
 def _fitted_options(out, problem, r, scene):
     lines = [f"# {scene} with the values fitted by python -m pfault.calibrate (calibration.json)",
-             f"-options_file {scene}"]
+             "# run it from the directory the calibration ran from (the scene's relative paths hold there)",
+             f"-options_file {os.path.abspath(scene)}"]
     lines += [f"-{p.option} {p.option_value(v)}" for p, v in zip(problem.parameters, r.values)]
     with open(os.path.join(out, "fitted.opts"), "w") as fh:
         fh.write("\n".join(lines) + "\n")

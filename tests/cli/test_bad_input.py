@@ -98,6 +98,14 @@ def inject(kind, rank, step):
                                     OED, "-pfault_output_dir", str(out)]
 
 
+def field_scene(prop, text, suffix=""):
+    """The oedometer with -pfault_material_soil_<prop> naming the field in ``text`` (a CSV file)."""
+    def args(tmp, out, ranks):
+        return ["-m", "pfault", OED, "-pfault_output_dir", str(out), f"-pfault_material_soil_{prop}",
+                f"field:{write(tmp / 'field.csv', text)}{suffix}"]
+    return args
+
+
 def include_loop(tmp, out, ranks):
     """a.opts includes b.opts, which includes a.opts again."""
     write(tmp / "b.opts", f"-options_file {OED}\n-options_file {tmp / 'a.opts'}\n")
@@ -182,6 +190,24 @@ CASES = [
     Case("bad_choice", scene("-pfault_bc_top_type", "clamped"), 1, "-pfault_bc_top_type: 'clamped' is not one of"),
     Case("missing_mesh_file", scene("-pfault_mesh_file", "nowhere.msh"), 1,
          "-pfault_mesh_file: no such file 'nowhere.msh'"),
+    # material properties from spatial fields (pfault.properties): checked before anything is written
+    Case("field_with_nans", field_scene("young_modulus", "z,E [MPa]\n-100,10\n-50,nan\n0,10\n"), 1,
+         "field.csv: 1 of 3 E are NaN or infinite; fill them (or remove those points) and run again"),
+    Case("field_negative_modulus", field_scene("young_modulus", "z,E [MPa]\n-100,10\n0,-10\n"), 1,
+         "field.csv: 1 values are not positive (e.g. -1e+07); fix the file's values"),
+    Case("field_poisson_ratio_one_half", field_scene("poisson_ratio", "z,nu\n-100,0.3\n0,0.5\n"), 1,
+         "field.csv: 1 values are not in (-1, 0.5) (e.g. 0.5)"),
+    Case("field_not_covering_the_cells", field_scene("young_modulus", "z,E [MPa]\n-60,10\n0,20\n"), 1,
+         "field.csv: 24 of 60 cells of 'soil' lie outside the field (their centroids at z -97.5..-62.5 m; the field "
+         "spans z -60..0 m); "
+         "extend the file or add ,outside=nearest to the option"),
+    Case("field_in_a_wrong_unit", field_scene("young_modulus", "z,E [m]\n-100,10\n0,20\n"), 1,
+         "field.csv: 'E' is in m, a length, but the option takes a pressure in Pa; give the variable in that unit"),
+    Case("field_variable_not_in_file", field_scene("young_modulus", "z,E\n-100,1e7\n0,2e7\n", ",variable=Ec"), 1,
+         "field.csv: no variable 'Ec' (the file has E); give one of them as variable=NAME"),
+    Case("field_file_missing", scene("-pfault_material_soil_density", "field:maps/none.nc"), 1,
+         "-pfault_material_soil_density field:maps/none.nc: no such file; give the path of a CSV, HDF5 or NetCDF "
+         "file"),
     Case("misspelled_ground_surface", scene("-pfault_ground_surface", "tpo"), 1,
          "-pfault_ground_surface tpo: no such physical surface in the mesh; give one of bottom, top, xmax", "kept"),
     Case("unused_solver_option", scene("-ksp_rtoll", "1e-3"), 1, "unused option -ksp_rtoll", "kept"),

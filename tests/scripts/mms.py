@@ -18,6 +18,7 @@ from pfault.mesh import distributed  # noqa: E402
 from pfault.mesh.box import box_mesh  # noqa: E402
 from pfault.physics import elasticity as el  # noqa: E402
 from pfault.physics.loading import MaterialDrawdown  # noqa: E402
+from pfault.properties import CellProperties  # noqa: E402
 from pfault.scene import Material  # noqa: E402
 from pfault.solver.equations import Equations  # noqa: E402
 from pfault.sources import TableSource  # noqa: E402
@@ -71,7 +72,8 @@ def solve(n):
             mask[np.unique(tri)] = 7
     mesh = distributed.build(comm, serial, vert_constraint=mask)
     dofmap = fields.build(mesh)
-    asm = ElasticAssembler(mesh, dofmap, [Material("soil", E, NU, 1.0, 2000.0)])
+    asm = ElasticAssembler(mesh, dofmap, CellProperties.of_cells([Material("soil", E, NU, 1.0, 2000.0)],
+                                                                 mesh.cell_material))
     prob = Equations(mesh, dofmap, asm, [], TableSource(MaterialDrawdown([None]), mesh.cell_material), None)
     u = prob.create_vec()
     x = mesh.coords[mesh.cells]                       # (nc,4,3)

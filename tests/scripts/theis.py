@@ -133,16 +133,13 @@ def interface(comm):
         mask = FIXED_HEAD_BIT * fixed_head_vertices(serial, fs.fixed_head_surfaces)
     mesh = distributed.build(comm, serial, vert_constraint=mask)
     cmat = mesh.cell_material
-    flow = GroundwaterFlow(mesh, fs.conductivity[cmat], fs.storage[cmat], wells=fs.wells,
+    flow = GroundwaterFlow(mesh, np.array(fs.conductivity)[cmat], np.array(fs.storage)[cmat], wells=fs.wells,
                            fixed_head=(mesh.vert_data[:, 0] & FIXED_HEAD_BIT) != 0, substeps=fs.substeps)
-    out = {"wells": wells_xy, "load_sum": [], "load_diff_vs_serial": [], "storage": fs.storage.tolist(),
-           "conductivity": fs.conductivity.tolist(), "rate_at_1day": fs.wells[0].rate(86400.0)}
-    for well, load in zip(fs.wells, flow.well_loads):
+    out = {"wells": wells_xy, "load_sum": [], "load_diff_vs_serial": [], "storage": list(fs.storage),
+           "conductivity": list(fs.conductivity), "rate_at_1day": fs.wells[0].rate(86400.0)}
+    for well, load in zip(fs.wells, flow.wells.loads):
         out["load_sum"].append(load.sum())
-        lv = flow.dm.getLocalVec()
-        flow.dm.globalToLocal(load, lv)
-        gathered = distributed.gather_vertex_values(mesh, lv.getArray().copy()[:, None])
-        flow.dm.restoreLocalVec(lv)
+        gathered = distributed.gather_vertex_values(mesh, flow.grid.to_local(load)[:, None])
         if comm.rank == 0:
             grad, vol = fl.tet_geometry(serial.points[serial.tets])
             length, mid = fl.vertical_line_in_tets(grad, vol, serial.points[serial.tets[:, 0]], well.x, well.y,
