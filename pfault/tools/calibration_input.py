@@ -6,8 +6,9 @@ Parameter file (CSV, one parameter a line, ``#`` comments), as PEST's parameter 
     E_clay,-pfault_material_clay_young_modulus,10*MPa,1*MPa,100*MPa,log,
     Q,-pfault_flow_well_rate,2*L/s,0.5*L/s,20*L/s,none,"0:{Q},120*day:{Q}"
 
-- ``option``: a numeric ``-pfault_`` option (a real, a quantity, or a material property given as a number), or a table or list option with a
-  ``value`` template in which ``{name}`` stands for the parameter (in SI units), e.g. a pumping rate;
+- ``option``: a numeric ``-pfault_`` option (a real, a quantity, or a material property given as a number), or
+  a table or list option with a ``value`` template in which ``{name}`` stands for the parameter (in SI units),
+  e.g. a pumping rate;
 - ``start``, ``lower``, ``upper``: numbers in SI units, or with a unit as in a scene (``10*MPa``);
 - ``transform``: ``log`` (fitted as log10 of the value, as PEST's PARTRANS log; the default for options in
   Pa, the moduli) or ``none``;
@@ -266,3 +267,27 @@ def station_names(path: str, scene: str) -> list[str]:
                                     "its first line names the columns name,x,y,z")
     k = header.index("name")
     return [r[k].strip() for r in rows[1:] if len(r) > k]
+
+
+FILE_OPTIONS = ("pfault_stations", "pfault_heads_file", "pfault_heads_grid")    # found beside the scene too
+FIELD = "field:"                                                                  # pfault.properties.FIELD_PREFIX
+
+
+def scene_files_absolute(scene: str) -> dict[str, str]:
+    """The scene's options that name data files (stations, heads, material fields), their paths made absolute as
+    pfault finds them (pfault.paths.beside_scene): a file of options that includes the scene from elsewhere
+    (fitted.opts) finds them too."""
+    try:
+        entries = {e.name: e.value for e in read_options_file(scene)}
+    except ArgumentError:
+        return {}
+    out = {}
+    for name, value in entries.items():
+        if not value:
+            continue
+        if name in FILE_OPTIONS:
+            out[name] = os.path.abspath(beside_scene(value, scene))
+        elif value.startswith(FIELD):
+            path, _, rest = value[len(FIELD):].partition(",")
+            out[name] = FIELD + os.path.abspath(beside_scene(path, scene)) + ("," + rest if rest else "")
+    return out

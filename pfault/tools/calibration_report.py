@@ -26,7 +26,7 @@ import shutil
 import numpy as np
 
 from .calibration import Fit, Problem
-from .calibration_input import COMPONENTS
+from .calibration_input import COMPONENTS, scene_files_absolute
 from .runs import read_station_series
 
 
@@ -92,6 +92,12 @@ def _fitted_options(out, problem, r, scene):
     lines = [f"# {scene} with the values fitted by python -m pfault.calibrate (calibration.json)",
              "# run it from the directory the calibration ran from (the scene's relative paths hold there)",
              f"-options_file {os.path.abspath(scene)}"]
+    fitted = {p.option for p in problem.parameters}
+    files = {k: v for k, v in scene_files_absolute(scene).items() if k not in fitted}
+    if files:
+        lines.append("# the scene's data files, found from anywhere")
+        lines += [f"-{name} {value}" for name, value in files.items()]
+    lines.append("# the fitted values")
     lines += [f"-{p.option} {p.option_value(v)}" for p, v in zip(problem.parameters, r.values)]
     with open(os.path.join(out, "fitted.opts"), "w") as fh:
         fh.write("\n".join(lines) + "\n")

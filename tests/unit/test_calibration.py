@@ -158,3 +158,28 @@ def test_the_loop_recovers_an_analytic_model_through_failed_runs(tmp_path, monke
             back = problem.evaluations[ev.number]          # the next run
             assert back.result.ok and back.values[0] < ev.values[0]
     assert sum(ev.purpose == "fitted" for ev in problem.evaluations) == 1
+
+
+def test_fitted_options_name_the_scene_s_files_by_absolute_paths(tmp_path, monkeypatch):
+    """The example site names its heads, stations and clay map beside the scene: a file of options elsewhere that
+    includes it (fitted.opts) gets them as absolute paths, a field's settings kept."""
+    from pfault.tools.calibration_input import scene_files_absolute
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    site = os.path.join(repo, "config", "site_example")
+    monkeypatch.chdir(tmp_path)
+    files = scene_files_absolute(os.path.join(site, "site.opts"))
+    assert files == {"pfault_stations": os.path.join(site, "stations.csv"),
+                     "pfault_heads_file": os.path.join(site, "site.hds"),
+                     "pfault_heads_grid": os.path.join(site, "site.dis.grb"),
+                     "pfault_material_clay_young_modulus": "field:" + os.path.join(site, "site_clay_modulus.csv")}
+    (tmp_path / "scenes").mkdir()
+    scene = tmp_path / "scenes" / "scene.opts"
+    scene.write_text("-pfault_stations stations.csv\n"
+                     "-pfault_material_sand_young_modulus field:map.csv,outside=nearest\n-pfault_heads_file here.hds\n")
+    (tmp_path / "scenes" / "stations.csv").write_text("name,x,y,z\n")
+    (tmp_path / "scenes" / "map.csv").write_text("x,y,value\n")
+    (tmp_path / "here.hds").write_text("")                      # from the working directory first
+    assert scene_files_absolute(str(scene)) == {
+        "pfault_stations": str(tmp_path / "scenes" / "stations.csv"),
+        "pfault_material_sand_young_modulus": f"field:{tmp_path / 'scenes' / 'map.csv'},outside=nearest",
+        "pfault_heads_file": str(tmp_path / "here.hds")}
