@@ -180,6 +180,9 @@ SPECS = [
        "insar_los.nc (CF NetCDF) and insar_los.png"),
     _s("pfault_insar_spacing", "quantity", None, "m", "pixel size of the LOS raster (default: the mean edge length "
        "of the land surface's triangles)"),
+    _s("pfault_hazard_strain_threshold", "quantity", 2e-4, "", "horizontal tensile strain of the land surface "
+       "above which it is fissure-prone (2e-4: within the 1e-4 to 7e-4 measured across active earth fissures): "
+       "summary.json's fissure-prone length and area"),
     _s("pfault_figures", "bool", True, "", "write PNG figures next to the output at the end of the run: fault "
        "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map"),
 ]

@@ -63,6 +63,7 @@ class Settings:
     water_density: float
     water_table: float
     max_cuts: int = 3
+    hazard_strain_threshold: float = 2e-4
 
 
 # the solver reads a negative K0 as "not given"; users cannot give one (read_settings rejects it)
@@ -90,7 +91,11 @@ def read_settings(reader: OptionReader, options_file: str = "") -> Settings:
                  time_steps=reader.get("pfault_time_steps"), geostatic=reader.get("pfault_geostatic"),
                  k0=K0_UNSET if k0 is None else k0, gravity=reader.get("pfault_gravity"),
                  water_density=reader.get("pfault_water_density"), water_table=reader.get("pfault_water_table"),
-                 max_cuts=reader.get("pfault_time_max_cuts"))
+                 max_cuts=reader.get("pfault_time_max_cuts"),
+                 hazard_strain_threshold=reader.get("pfault_hazard_strain_threshold"))
+    if not s.hazard_strain_threshold > 0:
+        raise InputError(f"-pfault_hazard_strain_threshold: must be positive, got {s.hazard_strain_threshold:g} "
+                         "(e.g. 2e-4 for 0.02 %)")
     if s.max_cuts < 0 or s.max_cuts > 10:
         raise InputError(f"-pfault_time_max_cuts: give 0 to 10 halvings, got {s.max_cuts}")
     if s.time_steps < 1:

@@ -145,7 +145,7 @@ class Simulation:
             "completed_steps": [r["step"] for r in last if r["converged"]],
         }
         from .io.hazard import summary_maxima
-        summary.update(summary_maxima(last))
+        summary.update(summary_maxima(last, m.settings.hazard_strain_threshold))
         if stop is not None:
             summary["stop_signal"] = stop
         if m.scene.restart_dir:

@@ -532,8 +532,8 @@ def has_surface(run_dir: str) -> bool:
 
 def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     """Earth-fissure hazard map of the land surface at one output time: largest horizontal principal strain
-    and angular distortion per surface triangle, fault traces dashed, maxima marked, and the largest value
-    of each over y against x; returns the PNG path."""
+    (the fissure-prone zone outlined) and angular distortion per surface triangle, fault traces dashed, maxima
+    marked, and the largest value of each over y against x; returns the PNG path."""
     plt = _pyplot()
     from matplotlib.tri import Triangulation
     snap = read_surface(run_dir, step)
@@ -561,6 +561,8 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
             ax.plot(trace[:, 0] * km, trace[:, 1] * km, "k--", lw=1.0, label="fault trace")
         ax.plot(centroids[i, 0] * km, centroids[i, 1] * km, "*", ms=13, mfc="gold", mec="black",
                 label=f"max {val[i]:.3g} at ({centroids[i, 0]:.0f}, {centroids[i, 1]:.0f}) m")
+        if key == "horizontal_strain":
+            _fissure_prone_outline(ax, run_dir, pts, tris, val, snap.time, km)
         ax.set_aspect("equal")
         ax.set_xlabel("x (km)")
         ax.set_ylabel("y (km)")
@@ -584,6 +586,25 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     fig.suptitle(f"{_scene(run_dir)}: earth-fissure hazard of the land surface")
     out = out or os.path.join(run_dir, FIGURES[3])
     return _save(fig, out)
+
+
+def _fissure_prone_outline(ax: Any, run_dir: str, pts: np.ndarray, tris: np.ndarray, strain: np.ndarray, t: float,
+                           km: float) -> None:
+    """The border of the triangles whose strain exceeds summary.json's hazard_strain_threshold, labelled with
+    the fissure-prone length of the step at time t (pfault.io.hazard); nothing for a run without them."""
+    from matplotlib.collections import LineCollection
+    summary = read_summary(run_dir)
+    threshold = summary.get("hazard_strain_threshold")
+    if threshold is None or not np.any(strain > threshold):
+        return
+    edges = np.sort(tris[strain > threshold][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges, count = np.unique(edges, axis=0, return_counts=True)
+    border = pts[edges[count == 1]][:, :, :2] * km
+    rec = [r for r in summary.get("steps", []) if abs(r.get("time_s", -1.0) - t) <= 1e-9 * max(abs(t), 1.0)]
+    length = rec[-1].get("fissure_prone_length_m") if rec else None
+    text = f", {length / 1e3:.3g} km long" if length is not None else ""
+    ax.add_collection(LineCollection(border, colors="black", linewidths=0.8,
+                                     label=f"fissure-prone (strain > {threshold:g}){text}"))
 
 
 def make_figures(run_dir: str, step: int = -1) -> list[str]:

@@ -133,7 +133,8 @@ class RunOutput:
         from .output import RunWriter
         m = self.model
         points, tets = self.output_mesh()
-        self.surface = hazard.land_surface(points, tets, m.serial, m.split, m.settings.ground_surface)
+        self.surface = hazard.land_surface(points, tets, m.serial, m.split, m.settings.ground_surface,
+                                           m.settings.hazard_strain_threshold)
         try:
             writer = RunWriter(output_dir, points, tets, m.serial.cell_material, m.scene.material_names,
                                fault_mesh=None if m.split is None else (m.serial.points, m.split.faces,

@@ -136,7 +136,9 @@ class StepOutput:
             return None
         fields = hazard.surface_fields(surf.points, surf.triangles, u)
         self.writer.write_surface_step(step, t, {"displacement": u}, fields)
-        return hazard.maxima(surf.points, surf.triangles, fields)
+        out = hazard.maxima(surf.points, surf.triangles, fields)
+        out.update(hazard.fissure_prone(surf.points, surf.triangles, u, surf.strain_threshold))
+        return out
 
     def close(self) -> None:
         for series in self.series.values():
