@@ -50,6 +50,8 @@ def _cases():
     c = {}
     for f in ("2", "1.4", "1"):
         c[f"3d-f{f}"] = (["--size-factor", f], 2 if f == "1" else 1, [], None)
+    c["3d-f2-zero"] = (["--size-factor", "2"], 1, [], None)
+    c["3d-f1.4-zero"] = (["--size-factor", "1.4"], 1, [], None)
     c["3d-f2-glued"] = (["--size-factor", "2"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"], None)
     c["3d-f2-cap10"] = (["--size-factor", "2", "--fault-top", "10"], 1, [], None)
     for frac in ("0.1", "0.001"):
