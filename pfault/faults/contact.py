@@ -23,7 +23,7 @@ which at a solution is the maximum-dissipation law (dg_T parallel to t_T, |t_T| 
 is read from the iterate inside every evaluation; r is continuous across stick/slip and across closed/open
 (tau = c - tan(phi) T = 0 at the switch, with or without cohesion). A cut-off at t_N = 0 with cohesion would
 drop the shear strength from c to 0 where the face opens: Newton then cycled a face between stuck and open
-(config/faulted_aquifer.opts at size factor 2: 203 Newton iterations and 8 sub-steps in one step, not
+(config/faulted_aquifer.opts at size factor 2: 200 Newton iterations and 8 sub-steps in its fifth year, not
 converged). The rows are forces (Pa m^2), like the displacement rows. The solution does not depend on
 c_N, c_T > 0 (stiffnesses, Pa/m, set per face by the interface from E/h and the stabilisation); they only
 decide which branch Newton takes. With the traction-jump stabilisation the jump g is the stabilised one,
@@ -143,8 +143,8 @@ def penalty_traction(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t_prev: np
 
     t_N = t0_N + c_N g_N while in contact (t_N <= T, the tensile strength), T when open; tangential return
     map from t_T^n + c_T dg_T onto the Mohr-Coulomb cone (no shear when open). t0_N is the initial (effective)
-    normal traction, 0 by default. ``branch``: the branches to
-    take instead of the return map's (stick or open only: the linear elastic trial of a step).
+    normal traction, 0 by default. ``branch``: the branches to take instead of the return map's (stick or open
+    only: the linear elastic trial of a step).
     """
     nf = len(g)
     kn, kt = law.c_n, law.c_t
