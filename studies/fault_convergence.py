@@ -60,6 +60,9 @@ def _cases():
     c["3d-f1.4-penalty"] = (["--size-factor", "1.4"], 1, ["-pfault_fault_fault_method", "penalty"], None)
     for h in ("8", "4", "2", "1", "0.5"):
         c[f"slab-h{h}"] = (["--slab", "--fault-size", h], 1, [], None)
+    # 52,000 tetrahedra: MUMPS, as the coarser slabs have by -pfault_solver auto (the iterative solver took 62
+    # Krylov iterations per Newton iteration on these flat elements)
+    c["slab-h0.25"] = (["--slab", "--fault-size", "0.25"], 1, ["-pfault_solver", "mumps"], None)
     for h in ("8", "2"):
         c[f"slab-h{h}-c0"] = (["--slab", "--fault-size", h], 1, ["-pfault_fault_fault_cohesion", "0"], None)
     for h in ("4", "1"):
