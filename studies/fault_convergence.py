@@ -18,7 +18,8 @@ The variants change one thing on the slab: the traction-jump stabilisation's sha
 local compliance estimate instead of pfault.faults.stabilization.COMPLIANCE_FRACTION, applied by wrapping
 stabilization_pairs in the child process), penalty faces (their default stiffness E/h, no stabilisation) instead
 of Lagrange faces (``penalty``),
-no cohesion (``c0``), a fault capped 10 m below the land surface with a welded contact above (``cap10``), the
+no cohesion (``c0``), a fault capped 10 m below the land surface with a welded contact above (``cap10``), an
+isotropic geostatic start (``k01``: K0 = 1 instead of nu / (1 - nu) of each material), the
 tension cut-off at t_N = 0 instead of the cone's apex (``zero``: pfault.faults.contact.tensile_strength replaced
 by zero in the child process), and ``glued`` (cohesion 1e4 MPa: no face slips; the elastic comparison of the
 slab with the 3-D block).
@@ -74,6 +75,9 @@ def _cases():
         c[f"slab-h{h}-cap10"] = (["--slab", "--fault-size", h, "--fault-top", "10"], 1, [], None)
     for h in ("8", "4", "2", "1"):
         c[f"slab-h{h}-zero"] = (["--slab", "--fault-size", h], 1, [], None)
+    for h in ("4", "1"):       # the initial state: K0 = 1 (an isotropic geostatic stress) instead of nu/(1-nu)
+        for law in ("", "-zero"):
+            c[f"slab-h{h}-k01{law}"] = (["--slab", "--fault-size", h], 1, ["-pfault_geostatic_k0", "1"], None)
     c["slab-h4-glued"] = (["--slab", "--fault-size", "4"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"], None)
     return c
 
