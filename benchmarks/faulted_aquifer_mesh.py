@@ -143,7 +143,10 @@ def build_slab(fault_size, fault_top=0.0, far_size=40.0, far_dist=200.0):
     gmsh.model.mesh.generate(3)
 
 
-def build(out, size_factor=1.0, slab=False, fault_size=2.0, fault_top=0.0):
+def build(out, size_factor=1.0, slab=False, fault_size=2.0, fault_top=0.0, strike_length=None):
+    global W
+    if strike_length is not None:
+        W = strike_length
     gmsh.initialize(["faulted_aquifer_mesh"], readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
     try:
@@ -166,5 +169,8 @@ if __name__ == "__main__":
     ap.add_argument("--fault-size", type=float, default=2.0, help="slab: element size on the fault (m)")
     ap.add_argument("--fault-top", type=float, default=0.0, help="depth of the fault's upper edge (m); above "
                     "it the rock-sediment contact is welded (physical surface contact, not split)")
+    ap.add_argument("--strike-length", type=float, default=None, help="3-D: length of the block along the strike "
+                    "(m, default 1000): a shorter block is the same plane-strain problem on fewer tetrahedra")
     a = ap.parse_args()
-    print(f"{a.out}: {build(a.out, a.size_factor, a.slab, a.fault_size, a.fault_top)} tetrahedra")
+    n = build(a.out, a.size_factor, a.slab, a.fault_size, a.fault_top, a.strike_length)
+    print(f"{a.out}: {n} tetrahedra")

@@ -19,7 +19,9 @@ local compliance estimate instead of pfault.faults.stabilization.COMPLIANCE_FRAC
 stabilization_pairs in the child process), penalty faces (their default stiffness E/h, no stabilisation) instead
 of Lagrange faces (``penalty``),
 no cohesion (``c0``), a fault capped 10 m below the land surface with a welded contact above (``cap10``), an
-isotropic geostatic start (``k01``: K0 = 1 instead of nu / (1 - nu) of each material), the
+isotropic geostatic start (``k01``: K0 = 1 instead of nu / (1 - nu) of each material), the 3-D block only
+40 m long along the strike (``3d-w40``: the same plane-strain problem, so that its tetrahedra can be refined to
+3.2 m on the fault), the
 tension cut-off at t_N = 0 instead of the cone's apex (``zero``: pfault.faults.contact.tensile_strength replaced
 by zero in the child process), and ``glued`` (cohesion 1e4 MPa: no face slips; the elastic comparison of the
 slab with the 3-D block).
@@ -53,6 +55,9 @@ def _cases():
         c[f"3d-f{f}"] = (["--size-factor", f], 2 if f == "1" else 1, [], None)
     c["3d-f2-zero"] = (["--size-factor", "2"], 1, [], None)
     c["3d-f1.4-zero"] = (["--size-factor", "1.4"], 1, [], None)
+    # the block 40 m long along the strike (the same plane-strain problem): its tetrahedra down to 3.2 m on the fault
+    for f in ("1", "0.5", "0.35"):
+        c[f"3d-w40-f{f}"] = (["--size-factor", f, "--strike-length", "40"], 1, [], None)
     c["3d-f2-glued"] = (["--size-factor", "2"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"], None)
     c["3d-f2-cap10"] = (["--size-factor", "2", "--fault-top", "10"], 1, [], None)
     for frac in ("0.1", "0.001"):
