@@ -1,30 +1,27 @@
 """Mesh convergence of the fault answer on the faulted aquifer (config/faulted_aquifer.opts): the 3-D block
 against size factor and its plane-strain slab against the fault's element size, and controlled variants.
 
-    .venv/bin/python benchmarks/fault_convergence.py [--cases NAME,...] [--no-run] [--list]
+    .venv/bin/python benchmarks/fault_convergence.py [--cases NAME,...] [--no-run] [--list] [--step N]
 
-Each case makes its mesh (benchmarks/faulted_aquifer_mesh.py) and runs the scene into
-runs/fault_convergence/<case>/ (one run at a time; 1 rank, 2 for the 3-D size factor 1), then one table of the
-last step (year 10; --step N: step N) is printed and written to runs/fault_convergence/table.md. The figures
-are per metre of strike (the block is 1 km long along the strike, the slab one element): the slip potency
-(integral of the slip magnitude over the fault, m^3/m), that of the slipping and open faces only and that of
-the faces above 10 m depth, the open volume (integral of the opening over the open faces), the slipping and
-open lengths down the dip (area / strike length), the largest slip and opening over slipping and open faces and
-over all faces (face averages, the fault output's), and the largest subsidence. Every run is
-also checked to converge in every step: the table gives its Newton iterations in the worst step and its
-sub-steps.
+Each case makes its mesh (benchmarks/faulted_aquifer_mesh.py) and runs the scene into runs/fault_convergence/<case>/
+(one run at a time; 1 rank, 2 for the 3-D size factor 1), then one table of the last step (year 10; --step N: step
+N) is printed and written to runs/fault_convergence/table.md. The figures are per metre of strike (the block is 1 km
+long along the strike, the slab one element): the slip potency (integral of the slip magnitude over the fault,
+m^3/m), that of the slipping and open faces only and that of the faces above 10 m depth, the open volume (integral
+of the opening over the open faces), the slipping and open lengths down the dip (area / strike length), the largest
+slip and opening over slipping and open faces and over all faces (face averages, the fault output's), and the
+largest subsidence. Every run is also checked to converge in every step: the table gives its Newton iterations in
+the worst step and its sub-steps.
 
-The variants change one thing on the slab: the traction-jump stabilisation's share (``frac<F>``: S at F of the
-local compliance estimate instead of pfault.faults.stabilization.COMPLIANCE_FRACTION, applied by wrapping
-stabilization_pairs in the child process), penalty faces (their default stiffness E/h, no stabilisation) instead
-of Lagrange faces (``penalty``),
-no cohesion (``c0``), a fault capped 10 m below the land surface with a welded contact above (``cap10``), an
-isotropic geostatic start (``k01``: K0 = 1 instead of nu / (1 - nu) of each material), the 3-D block only
-40 m long along the strike (``3d-w40``: the same plane-strain problem, so that its tetrahedra can be refined to
-3.2 m on the fault), the
-tension cut-off at t_N = 0 instead of the cone's apex (``zero``: pfault.faults.contact.tensile_strength replaced
-by zero in the child process), and ``glued`` (cohesion 1e4 MPa: no face slips; the elastic comparison of the
-slab with the 3-D block).
+The variants change one thing, on the slab or the block: the traction-jump stabilisation's share (``frac<F>``: S at F of the local
+compliance estimate instead of pfault.faults.stabilization.COMPLIANCE_FRACTION, applied by wrapping
+stabilization_pairs in the child process), penalty faces (their default stiffness E/h, no stabilisation) instead of
+Lagrange faces (``penalty``), no cohesion (``c0``), a fault capped 10 m below the land surface with a welded contact
+above (``cap10``), an isotropic geostatic start (``k01``: K0 = 1 instead of nu / (1 - nu) of each material), the 3-D
+block only 40 m long along the strike (``3d-w40``: the same plane-strain problem, so that its tetrahedra can be
+refined to 3.2 m on the fault), the tension cut-off at t_N = 0 instead of the cone's apex (``zero``:
+pfault.faults.contact.tensile_strength replaced by zero in the child process), and ``glued`` (cohesion 1e4 MPa: no
+face slips; the elastic comparison of the slab with the 3-D block).
 --no-run rebuilds the table from the run directories already there.
 """
 
@@ -55,7 +52,7 @@ def _cases():
         c[f"3d-f{f}"] = (["--size-factor", f], 2 if f == "1" else 1, [], None)
     c["3d-f2-zero"] = (["--size-factor", "2"], 1, [], None)
     c["3d-f1.4-zero"] = (["--size-factor", "1.4"], 1, [], None)
-    # the block 40 m long along the strike (the same plane-strain problem): its tetrahedra down to 3.2 m on the fault
+    # the block 40 m long along the strike (the same plane-strain problem), down to 3.2 m on the fault
     for f in ("1", "0.5", "0.35"):
         c[f"3d-w40-f{f}"] = (["--size-factor", f, "--strike-length", "40"], 1, [], None)
     c["3d-f2-glued"] = (["--size-factor", "2"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"], None)
@@ -105,8 +102,8 @@ def run(name):
     os.makedirs(out, exist_ok=True)
     mesh = _mesh(mesh_args)
     cutoff = "zero" if name.endswith("-zero") else "apex"
-    cmd = [sys.executable, os.path.join(ROOT, "benchmarks", "fault_convergence.py"), "--child", str(frac or 0), cutoff, SCENE,
-           "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *QUIET, *opts]
+    cmd = [sys.executable, os.path.join(ROOT, "benchmarks", "fault_convergence.py"), "--child", str(frac or 0),
+           cutoff, SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *QUIET, *opts]
     if ranks > 1:
         cmd = ["mpirun", "-n", str(ranks), *cmd]
     env = dict(os.environ, OMP_NUM_THREADS="1")
