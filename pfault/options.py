@@ -98,7 +98,8 @@ SPECS = [
        "traction and displacement (default: constant 1)"),
     # faults
     _s("pfault_faults", "names", "", "", "physical surfaces that are faults (split, with contact and friction)"),
-    _s("pfault_fault_<fault>_cohesion", "quantity", 0.0, "Pa", "cohesion c of the Mohr-Coulomb criterion"),
+    _s("pfault_fault_<fault>_cohesion", "quantity", 0.0, "Pa", "cohesion c of the Mohr-Coulomb criterion (a "
+       "face opens at the cone's apex, a tensile effective normal traction c / tan(phi))"),
     _s("pfault_fault_<fault>_friction_angle", "quantity", 30.0, "degree", "friction angle phi"),
     _s("pfault_fault_<fault>_method", "choice", "lagrange", "", "contact enforcement",
        choices=("lagrange", "penalty")),

@@ -6,19 +6,25 @@ Conventions
 - jump g = u_plus - u_minus (face average of the P1 jump); local g_loc = R g; g_N > 0 is opening.
 - traction t (local): the traction the plus side exerts on the minus side; t_N < 0 is compression. The
   laws act on the effective traction (t_N + alpha p for a wet fault).
-- Mohr-Coulomb: |t_T| <= tau_L = c - t_N tan(phi).
+- Mohr-Coulomb with its tension cut-off at the apex: |t_T| <= tau_L = c - t_N tan(phi) and t_N <= T, with
+  the tensile strength T = c / tan(phi) where the cone's shear strength reaches zero (T = 0 without cohesion;
+  a face with cohesion and phi = 0 never opens). A face opens when its normal traction reaches T, and an open
+  face carries T normal to it and no shear: the strength surface has no jump where a face opens.
 
 Lagrange faces: one semismooth complementarity residual per face (Alart-Curnier, the projection form of
 Hueber, Stadler & Wohlmuth), with the augmented normal traction lam = t_N + c_N g_N and the augmented
 tangential traction q = t_T + c_T dg_T (dg_T = g_T - g_T^n, the slip of the step):
 
-    r_N = A (t_N - min(0, lam))                  closed (lam <= 0): -A c_N g_N;  open: A t_N
+    r_N = A (t_N - min(T, lam))                  closed (lam <= T): -A c_N g_N;  open: A (t_N - T)
     r_T = A (t_T - P_tau(q)),  tau = max(0, c - tan(phi) lam)   on closed faces, 0 on open ones
 
 P_tau projects onto the disc of radius tau: stick (|q| <= tau) r_T = -A c_T dg_T; slip r_T = A (t_T - tau q/|q|),
 which at a solution is the maximum-dissipation law (dg_T parallel to t_T, |t_T| = tau). The state of each face
-is read from the iterate inside every evaluation; r is continuous across stick/slip and, without cohesion,
-across closed/open. The rows are forces (Pa m^2), like the displacement rows. The solution does not depend on
+is read from the iterate inside every evaluation; r is continuous across stick/slip and across closed/open
+(tau = c - tan(phi) T = 0 at the switch, with or without cohesion). A cut-off at t_N = 0 with cohesion would
+drop the shear strength from c to 0 where the face opens: Newton then cycled a face between stuck and open
+(config/faulted_aquifer.opts at size factor 2: 200 Newton iterations and 8 sub-steps in its fifth year, not
+converged). The rows are forces (Pa m^2), like the displacement rows. The solution does not depend on
 c_N, c_T > 0 (stiffnesses, Pa/m, set per face by the interface from E/h and the stabilisation); they only
 decide which branch Newton takes. With the traction-jump stabilisation the jump g is the stabilised one,
 which depends on the face's own traction: c must keep t + c g increasing in t (see ``FaultInterface._laws``).
@@ -64,13 +70,26 @@ def coulomb_limit(t_n: np.ndarray, cohesion: np.ndarray, tan_phi: np.ndarray) ->
     return np.maximum(cohesion - tan_phi * t_n, 0.0)
 
 
+def tensile_strength(cohesion: np.ndarray, tan_phi: np.ndarray) -> np.ndarray:
+    """T = c / tan(phi) (Pa): the normal traction at the apex of the Mohr-Coulomb cone, where its shear
+    strength reaches zero; 0 without cohesion, infinite with cohesion and phi = 0 (such a face never opens)."""
+    c = np.asarray(cohesion, dtype=float)
+    tp = np.broadcast_to(np.asarray(tan_phi, dtype=float), c.shape)
+    out = np.zeros(c.shape)
+    pos = c > 0
+    np.divide(c, tp, out=out, where=pos & (tp > 0))
+    out[pos & ~(tp > 0)] = np.inf
+    return out
+
+
 def states(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t: np.ndarray, tol: float = 0.0) -> np.ndarray:
     """Stick/slip/open of each face at the iterate (g, t): the branch of the semismooth residual. With tol > 0
     (Pa) a face within tol of a switch is reported in the branch that holds it in place (closed, stuck): at zero
     traction and zero jump a face is at once open, slipping and stuck, and round-off must not pick one."""
     lam = t[:, 0] + law.c_n * g[:, 0]
-    closed = lam <= tol        # a face without traction and jump (a fresh fault) starts closed
-    tau = np.where(closed, coulomb_limit(np.minimum(lam, 0.0), law.cohesion, law.tan_phi), 0.0)
+    strength = tensile_strength(law.cohesion, law.tan_phi)
+    closed = lam <= strength + tol     # a face without traction and jump (a fresh fault) starts closed
+    tau = np.where(closed, coulomb_limit(np.minimum(lam, strength), law.cohesion, law.tan_phi), 0.0)
     q = t[:, 1:] + law.c_t[:, None] * (g[:, 1:] - g_prev[:, 1:])
     slip = closed & (np.linalg.norm(q, axis=1) > tau + tol)
     return np.where(closed, np.where(slip, SLIP, STICK), OPEN)
@@ -89,10 +108,11 @@ def lagrange_rows(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t: np.ndarray
     dt = np.zeros((nf, 3, 3))
     opn = st == OPEN
     closed = ~opn
-    # normal: closed -A c_N g_N, open A t_N
+    # normal: closed -A c_N g_N, open A (t_N - T); no shear on an open face
     r[closed, 0] = -cn[closed] * g[closed, 0]
     dg[closed, 0, 0] = -cn[closed]
     r[opn] = t[opn]
+    r[opn, 0] -= tensile_strength(law.cohesion[opn], law.tan_phi[opn])
     dt[opn] = np.eye(3)[None]
     # stick: -A c_T dg_T
     stick = st == STICK
@@ -121,9 +141,10 @@ def penalty_traction(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t_prev: np
                      branch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Penalty contact: traction (nf,3), derivative dt/dg (nf,3,3) and state.
 
-    t_N = t0_N + c_N g_N while in contact (t_N <= 0), 0 when open; tangential return map from
-    t_T^n + c_T dg_T. t0_N is the initial (effective) normal traction, 0 by default. ``branch``: the branches to
-    take instead of the return map's (stick or open only: the linear elastic trial of a step).
+    t_N = t0_N + c_N g_N while in contact (t_N <= T, the tensile strength), T when open; tangential return
+    map from t_T^n + c_T dg_T onto the Mohr-Coulomb cone (no shear when open). t0_N is the initial (effective)
+    normal traction, 0 by default. ``branch``: the branches to take instead of the return map's (stick or open
+    only: the linear elastic trial of a step).
     """
     nf = len(g)
     kn, kt = law.c_n, law.c_t
@@ -132,8 +153,10 @@ def penalty_traction(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t_prev: np
     state = np.full(nf, OPEN)
     t0n = np.zeros(nf) if t0_n is None else t0_n
     tn_trial = t0n + kn * g[:, 0]
-    closed = tn_trial <= 0 if branch is None else np.asarray(branch) != OPEN
+    strength = tensile_strength(law.cohesion, law.tan_phi)
+    closed = tn_trial <= strength if branch is None else np.asarray(branch) != OPEN
     t[closed, 0] = tn_trial[closed]
+    t[~closed, 0] = strength[~closed]
     d[closed, 0, 0] = kn[closed]
     trial = t_prev[:, 1:] + kt[:, None] * (g[:, 1:] - g_prev[:, 1:])
     tau = coulomb_limit(t[:, 0], law.cohesion, law.tan_phi)

@@ -12,7 +12,8 @@ contact configuration and measures, for h = 1e-2, 1e-3, 1e-4 and a direction v t
 Cases: Lagrange faces in the stick, slip (with a slip increment, and before any increment), open branches of the
 semismooth law and a mix of the three (face id mod 3), placed there by the multipliers and jumps of x; penalty
 faces in the stick, slip and open branches of the return map (selected by the jump). The branch of every face is
-checked not to change between x and x + h v (the test stays away from the kinks). Prints one JSON line
+checked not to change between x and x + h v (the test stays away from the kinks). Then every case again with
+cohesion (prefix ``cohesive_``: the tension cut-off at c / tan(phi) on open faces). Prints one JSON line
 {case: {e1, e2, order1, order2, states, ...}}.
 """
 import json
@@ -31,6 +32,7 @@ from pfault.faults.interface import StepStart  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 H = (1e-2, 1e-3, 1e-4)
+COHESION = 1e5      # Pa: the cohesive cases' c (tensile strength c / tan(30 degrees) = 1.7e5 Pa)
 COMM = PETSc.COMM_WORLD
 
 
@@ -105,7 +107,7 @@ T_STICK, T_SLIP, T_OPEN = (-1e6, 1e5, 5e4), (-1e6, 6e5, -5e5), (-1e5, 1e5, 0.0)
 G_PREV = (0.0, 1e-3, 2e-3)
 
 
-def lagrange_cases(results):
+def lagrange_cases(results, prefix=""):
     sim = Simulation(SCENE, sys.argv)
     p, f = sim.model.equations, sim.model.faults
     p.loads.set(1.0)
@@ -121,13 +123,13 @@ def lagrange_cases(results):
         set_history(f, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
         x, v = make_vectors(sim, offset=(0.0, 1e-3, 2e-3) if offset is None else offset, rng=rng, t_mean=t_mean,
                             t_noise=2e4)
-        results["lagrange_" + name] = taylor(sim, x, v)
+        results[prefix + "lagrange_" + name] = taylor(sim, x, v)
         x.destroy()
         v.destroy()
     sim.destroy()
 
 
-def penalty_cases(results):
+def penalty_cases(results, prefix=""):
     opts = PETSc.Options()
     opts.setValue("pfault_fault_fault_method", "penalty")
     sim = Simulation(SCENE, sys.argv)
@@ -143,15 +145,20 @@ def penalty_cases(results):
             ("open", (1e-2, 0.0, 3e-2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))):
         set_history(f, rng, g_prev, t_prev)
         x, v = make_vectors(sim, offset=offset, rng=rng)
-        results["penalty_" + name] = taylor(sim, x, v)
+        results[prefix + "penalty_" + name] = taylor(sim, x, v)
         x.destroy()
         v.destroy()
     sim.destroy()
+    opts.delValue("pfault_fault_fault_method")
 
 
 if __name__ == "__main__":
     res = {"ranks": COMM.size}
     lagrange_cases(res)
     penalty_cases(res)
+    # the same with cohesion: open faces then carry the tensile strength c / tan(phi)
+    PETSc.Options().setValue("pfault_fault_fault_cohesion", COHESION)
+    lagrange_cases(res, "cohesive_")
+    penalty_cases(res, "cohesive_")
     if COMM.rank == 0:
         print(json.dumps(res))

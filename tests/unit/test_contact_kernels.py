@@ -1,6 +1,7 @@
 """Contact/friction kernels (pfault.faults.contact): the semismooth residual's generalised derivative against
 finite differences in every state away from the kinks, its zeros (the contact conditions), its continuity
-across the stick/slip and closed/open switches, and its independence of the augmentation; the penalty law."""
+across the stick/slip and closed/open switches with and without cohesion (the tension cut-off at the cone's
+apex), and its independence of the augmentation; the penalty law."""
 
 import numpy as np
 import pytest
@@ -37,9 +38,10 @@ def sample(state, n=60):
         g[:, 0] = RNG.normal(size=4 * n) * 1e-4
         t[:, 0] = -np.abs(t[:, 0]) - 5e4
     lam = t[:, 0] + lw.c_n * g[:, 0]
-    tau = ct.coulomb_limit(np.minimum(lam, 0.0), lw.cohesion, lw.tan_phi)
+    strength = ct.tensile_strength(lw.cohesion, lw.tan_phi)
+    tau = ct.coulomb_limit(np.minimum(lam, strength), lw.cohesion, lw.tan_phi)
     q = np.linalg.norm(t[:, 1:] + lw.c_t[:, None] * (g[:, 1:] - gp[:, 1:]), axis=1)
-    away = (np.abs(lam) > 0.05 * np.abs(t[:, 0]) + 1.0) & (np.abs(q - tau) > 0.05 * tau + 1.0)
+    away = (np.abs(lam - strength) > 0.05 * np.abs(t[:, 0]) + 1.0) & (np.abs(q - tau) > 0.05 * tau + 1.0)
     keep = np.nonzero((ct.states(lw, g, gp, t) == state) & away)[0][:n]
     assert len(keep) >= 10, "sampler found too few faces in the state"
     return lw[keep], g[keep], gp[keep], t[keep]
@@ -56,7 +58,8 @@ def test_semismooth_derivatives_in_each_state(state):
 
 def test_zeros_are_the_contact_conditions():
     """r = 0 exactly on: a closed stuck face (no normal jump, no slip increment, |t_T| <= tau); a slipping face
-    whose traction is on the Coulomb limit along its slip increment; an open face with zero traction."""
+    whose traction is on the Coulomb limit along its slip increment; an open face whose traction is the tensile
+    strength c / tan(phi) normal to it."""
     n = 12
     lw = law(n, c=5e6)
     gp = RNG.normal(size=(n, 3)) * 1e-2
@@ -73,9 +76,11 @@ def test_zeros_are_the_contact_conditions():
     g[slip, 1:] = gp[slip, 1:] + 1e-3 * d[slip]
     t[slip, 1:] = tau[slip, None] * d[slip]
     g[:, 0] = 0.0
-    # open: opening, no traction
+    # open: opening, the tensile strength normal to the face, no shear
     g[opn, 0] = 1e-3
     t[opn] = 0.0
+    t[opn, 0] = lw.cohesion[opn] / lw.tan_phi[opn]
+    assert np.all(t[opn, 0] > 0)
     st, r, _, _ = ct.lagrange_rows(lw, g, gp, t)
     assert list(st) == [ct.STICK, ct.SLIP, ct.OPEN] * (n // 3)
     assert np.abs(r).max() < 1e-9 * np.abs(t).max()
@@ -98,6 +103,7 @@ def test_the_solution_does_not_depend_on_the_augmentation():
     g[3:6, 1] = 2e-3
     t[3:6, 1] = tau[3:6]
     g[6:, 0], t[6:] = 1e-3, 0.0
+    t[6:, 0] = ct.tensile_strength(lw.cohesion[6:], lw.tan_phi[6:])
     t[:3, 1] = 0.5 * tau[:3]
     for c in (1e3, 1e6, 1e9, 1e12):
         lc = ct.FaceLaw(lw.area, lw.cohesion, lw.tan_phi, np.full(n, c), np.full(n, c))
@@ -124,6 +130,43 @@ def test_residual_is_continuous_across_the_switches():
     st, r, _, _ = ct.lagrange_rows(lw, g, gp, t)
     assert st[0] != ct.OPEN and st[1] == ct.OPEN
     assert np.abs(r[0] - r[1]).max() < 1e-3
+
+
+@pytest.mark.parametrize("phi", [30.0, 10.0])
+def test_residual_with_cohesion_is_continuous_where_a_face_opens(phi):
+    """With cohesion c the face opens where its augmented normal traction reaches the cone's apex
+    T = c / tan(phi), where the shear strength is zero: r (all three rows, a slipping or stuck face against an
+    open one) has no jump there. A cut-off at t_N = 0 would drop the shear row by A c."""
+    c, tphi, area = 1e5, np.tan(np.radians(phi)), 1.5
+    strength = c / tphi
+    lw = ct.FaceLaw(np.full(4, area), np.full(4, c), np.full(4, tphi), np.full(4, 1e6), np.full(4, 0.7e6))
+    gp = np.zeros((4, 3))
+    g = np.zeros((4, 3))
+    g[:, 1] = 1e-4                              # a slip increment: slipping once the strength is below |q|
+    eps = 1e-9 * strength
+    t = np.array([[strength - eps, 50.0, 0], [strength + eps, 50.0, 0],
+                  [-1e3, 0.0, 0], [0.0, 0.0, 0]], float)
+    st, r, _, _ = ct.lagrange_rows(lw, g, gp, t)
+    assert st[0] == ct.SLIP and st[1] == ct.OPEN
+    assert np.abs(r[0] - r[1]).max() < 1e-6 * area * strength
+    # below the apex the face is closed and holds shear up to c - tan(phi) t_N: under zero normal traction c
+    assert st[2] == ct.STICK or st[2] == ct.SLIP
+    assert np.isclose(ct.coulomb_limit(t[3, 0], c, tphi), c)
+    assert ct.states(lw[np.array([3])], np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)))[0] == ct.STICK
+    # the penalty law: the same cut-off, continuous traction
+    gn = np.array([(strength - eps) / 1e6, (strength + eps) / 1e6])
+    gpen = np.zeros((2, 3))
+    gpen[:, 0] = gn
+    gpen[:, 1] = 1e-4
+    tp, _, stp = ct.penalty_traction(lw[np.arange(2)], gpen, np.zeros((2, 3)), np.zeros((2, 3)))
+    assert list(stp) == [ct.SLIP, ct.OPEN]
+    assert np.abs(tp[0] - tp[1]).max() < 1e-6 * strength
+
+
+def test_tensile_strength():
+    """T = c / tan(phi); 0 without cohesion (whatever phi), infinite with cohesion and phi = 0."""
+    s = ct.tensile_strength(np.array([1e5, 0.0, 0.0, 1e5]), np.array([TAN30, TAN30, 0.0, 0.0]))
+    assert np.isclose(s[0], 1e5 / TAN30) and s[1] == 0 and s[2] == 0 and np.isinf(s[3])
 
 
 def test_fresh_fault_starts_closed():

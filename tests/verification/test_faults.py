@@ -347,25 +347,27 @@ def test_jacobian_taylor_remainder(taylor):
     Stick and open (Lagrange) and the closed-stick and open penalty branches are affine in x: there the remainder
     is round-off at every h (measured ~1e-10 against a first-order term >= 8), a stronger check than an order.
     Slip (with a slip increment, and before any increment), a mix of stick/slip/open faces and penalty slip are
-    curved: order 2.000 measured (1.99 for the first interval of slip-before-increment).
+    curved: order 2.000 measured (1.99 for the first interval of slip-before-increment). The same with cohesion
+    (``cohesive_``: open faces carry the tensile strength c / tan(phi)).
     """
     assert min(taylor["faces_per_rank"]) > 0
     nf = sum(taylor["faces_per_rank"])
     expected = {"lagrange_stick": (nf, 0, 0), "lagrange_slip": (0, nf, 0), "lagrange_open": (0, 0, nf),
                 "lagrange_slip_start": (0, nf, 0), "penalty_stick": (nf, 0, 0), "penalty_slip": (0, nf, 0),
                 "penalty_open": (0, 0, nf)}
-    for name in AFFINE + CURVED:
+    for name in AFFINE + CURVED + ["cohesive_" + n for n in AFFINE + CURVED]:
         c = taylor[name]
         st = c["states"]
-        if name in expected:
-            assert (st["stick"], st["slip"], st["open"]) == expected[name], name
+        base = name.removeprefix("cohesive_")
+        if base in expected:
+            assert (st["stick"], st["slip"], st["open"]) == expected[base], name
         else:
             assert min(st.values()) > 0 and sum(st.values()) == nf, name
-        if name.startswith("penalty"):
+        if base.startswith("penalty"):
             assert c["states_unchanged"], name              # no branch switch between x and x + h v
         for o in c["order1"]:
             assert 0.98 <= o <= 1.02, (name, c["order1"])
-        if name in AFFINE:
+        if base in AFFINE:
             for e1, e2 in zip(c["e1"], c["e2"]):
                 assert e2 <= 1e-9 * e1, (name, c["e1"], c["e2"])
         else:
