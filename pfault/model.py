@@ -225,13 +225,17 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
         source = _source(scene, mesh)
         faults = None
         if scene.effects.faults:
+            from .faults.bubbles import CellBubbles
             from .faults.faces import FaultFaces
             from .faults.interface import FaultInterface
             _check_iterative_faults(scene.fault_settings)
             with logged("pfaultFaultSetup"):
-                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, scene.materials,
-                                   constrained_local(mesh, dofmap), mesh.dm.getLGMap())
-                faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact)
+                fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
+                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, scene.materials, fixed, lgmap)
+                bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, faces.lagrange, dofmap.cell_dofs, fixed,
+                                      (assembler.grad, assembler.vol, assembler.lam, assembler.mu), faces.area,
+                                      faces.R, lgmap.apply, PETSc.IntType)
+                faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact, bubbles)
         equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, faults,
                               scene.contact)
     except BaseException:

@@ -19,6 +19,7 @@ pfault.mesh.serial.TET_FACES) of each of the cell's fault faces, -1 for an empty
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from math import factorial
 
@@ -159,3 +160,128 @@ def body_bubble_load(vol: np.ndarray, b: np.ndarray, lface: np.ndarray) -> np.nd
     """Load of a constant body force b (n, 3) per cell on the bubbles: (9/40) V b each (n, 3m)."""
     f = (VOLUME_MEAN * vol[:, None] * b)[:, None, :] * (lface >= 0)[:, :, None]
     return f.reshape(len(vol), -1)
+
+
+class CellBubbles:
+    """The bubbles of the cells on both sides of a rank's Lagrange fault faces, condensed: what they add to the
+    cells' stiffness, to the faces' mean jumps, to the displacement rows and to the Jacobian, in the rank's local
+    dof numbering (pure NumPy; the interface turns it into PETSc insertions).
+
+    ``side_cell``, ``side_lface`` (nf, 2): the minus and plus cells of each owned face (local ids) and the face's
+    local face in each; ``enriched`` (nf,): the faces with bubbles (Lagrange faces); ``cell_dofs`` (nc, 12) local
+    dofs; ``fixed`` a mask of the local dofs held by Dirichlet conditions (they take no force);
+    ``cells`` (grad, vol, lam, mu) of all local cells; ``area``, ``R`` of the faces; ``to_global`` maps local dofs
+    to global ones (taking integers of the type ``index_type``)."""
+
+    def __init__(self, side_cell: np.ndarray, side_lface: np.ndarray, enriched: np.ndarray, cell_dofs: np.ndarray,
+                 fixed: np.ndarray, cells: tuple, area: np.ndarray, R: np.ndarray, to_global: Callable,
+                 index_type: type = np.int64) -> None:
+        grad, vol, lam, mu = cells
+        face = np.repeat(np.nonzero(enriched)[0], 2)
+        side = np.tile([0, 1], len(face) // 2)
+        cell, lface = side_cell[face, side], side_lface[face, side]
+        self.cell, inv = np.unique(cell, return_inverse=True)            # enriched cells (local ids)
+        order = np.lexsort((lface, inv))
+        first = np.searchsorted(inv[order], inv[order])
+        slot = np.empty(len(face), np.int64)
+        slot[order] = np.arange(len(face)) - first
+        ne, m = len(self.cell), int(slot.max()) + 1 if len(face) else 1
+        self.face = np.full((ne, m), -1)                                   # owned face of each slot
+        lf = np.full((ne, m), -1)
+        sign = np.zeros((ne, m))
+        self.face[inv, slot], lf[inv, slot], sign[inv, slot] = face, lface, np.where(side == 0, -1.0, 1.0)
+        self.lface = lf
+        f = np.maximum(self.face, 0)
+        c = self.cell
+        self.cond = condense(grad[c], vol[c], lam[c], mu[c], lf, sign, area[f], R[f])
+        self.N = self.cond.displacement_of()            # (ne, m, 3, 12)
+        self.M = self.cond.traction_of()                # (ne, m, m, 3, 3)
+        self.dofs = cell_dofs[c]
+        self.free = ~fixed[self.dofs]
+        self.nf = len(area)
+        self.fb = np.zeros((ne, 3 * m))                 # the bubbles' load of the time last set
+        self.g_load = np.zeros((ne, m, 3))              # its part of each slot's A g
+        self._grad, self._vol = grad[c], vol[c]
+        self._to_global, self._int = to_global, index_type
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.face >= 0
+
+    def g_dofs(self, local: np.ndarray) -> np.ndarray:
+        """Global numbers of local dofs (any shape)."""
+        local = np.asarray(local)
+        if local.size == 0:
+            return local.astype(np.int64)
+        return np.asarray(self._to_global(local.ravel().astype(self._int))).reshape(local.shape)
+
+    def stiffness(self) -> tuple[np.ndarray, np.ndarray]:
+        """(local dofs (ne, 12), -K_ub K_bb^-1 K_bu (ne, 12, 12)) to add to the cells' stiffness."""
+        return self.dofs, self.cond.stiffness()
+
+    # -- loads -----------------------------------------------------------------------------------
+    def set_load(self, fb: np.ndarray, out: np.ndarray) -> None:
+        """Take fb (ne, 3m) as the bubbles' load: keep its part of the faces' jumps and add the condensed
+        displacement load -K_ub K_bb^-1 fb to the local array ``out`` (free dofs)."""
+        self.fb = fb
+        fu, self.g_load = self.cond.load_of(fb)
+        out += np.bincount(self.dofs.ravel(), weights=(fu * self.free).ravel(), minlength=len(out))
+
+    def pore_pressure_load(self, alpha_dp: np.ndarray) -> np.ndarray:
+        """Bubble load of the Biot term for alpha dp per local cell."""
+        return pore_pressure_bubble_load(self._grad, self._vol, alpha_dp[self.cell], self.lface)
+
+    def body_load(self, b: np.ndarray) -> np.ndarray:
+        """Bubble load of body forces b (nc, 3) per local cell."""
+        return body_bubble_load(self._vol, b[self.cell], self.lface)
+
+    def jump_of_load(self) -> np.ndarray:
+        """The load's part of each face's A g (nf, 3; local frame)."""
+        out = np.zeros((self.nf, 3))
+        np.add.at(out, self.face[self.valid], self.g_load[self.valid])
+        return out
+
+    # -- residual ----------------------------------------------------------------------------------
+    def jump(self, u_loc: np.ndarray, dt: np.ndarray) -> np.ndarray:
+        """The bubbles' part of A g (nf, 3; local frame, zero on faces without bubbles) at displacements u_loc and
+        tractions' changes dt (nf, 3) since the initial state."""
+        ue = u_loc[self.dofs]
+        dts = dt[np.maximum(self.face, 0)] * self.valid[:, :, None]            # (ne, m, 3)
+        ag = (np.einsum("nsik,nk->nsi", self.N, ue) + np.einsum("nsrij,nrj->nsi", self.M, dts) + self.g_load)
+        out = np.zeros((self.nf, 3))
+        v = self.valid
+        np.add.at(out, self.face[v], ag[v])
+        return out
+
+    def forces(self, dt: np.ndarray, out: np.ndarray) -> None:
+        """Add the displacement rows' forces of the tractions' changes through the bubbles,
+        -K_ub K_bb^-1 C^T dt = sum_s N_s^T dt_s, to the local array ``out`` (free dofs)."""
+        dts = dt[np.maximum(self.face, 0)] * self.valid[:, :, None]
+        fu = np.einsum("nsik,nsi->nk", self.N, dts) * self.free
+        out += np.bincount(self.dofs.ravel(), weights=fu.ravel(), minlength=len(out))
+
+    def bubble_dofs(self, u_loc: np.ndarray, dt: np.ndarray) -> np.ndarray:
+        """The bubble dofs b (ne, 3m) recovered from the condensed solution."""
+        dts = dt[np.maximum(self.face, 0)] * self.valid[:, :, None]
+        return self.cond.bubbles(u_loc[self.dofs], dts, self.fb)
+
+    # -- Jacobian ----------------------------------------------------------------------------------
+    def jacobian_blocks(self, drdg: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Blocks of the Jacobian through the bubbles, for the faces' law derivatives
+        drdg = d r / d(A g) (nf, 3, 3): as (kind, rows, cols, values) with kind 'fu' (face rows, local dof
+        columns (n, 12), values (n, 3, 12)), 'ff' (face rows, face columns, (n, 3, 3)) and 'uf' (local dof rows
+        (n, 12), face columns, (n, 12, 3))."""
+        e, s = np.nonzero(self.valid)
+        f = self.face[e, s]
+        fu = np.einsum("nij,njk->nik", drdg[f], self.N[e, s]) * self.free[e][:, None, :]
+        uf = np.swapaxes(self.N[e, s], 1, 2) * self.free[e][:, :, None]
+        e2, s2, r2 = np.nonzero(self.valid[:, :, None] & self.valid[:, None, :])
+        ff = np.einsum("nij,njk->nik", drdg[self.face[e2, s2]], self.M[e2, s2, r2])
+        return [("fu", f, self.dofs[e], fu), ("ff", self.face[e2, s2], self.face[e2, r2], ff),
+                ("uf", self.dofs[e], f, uf)]
+
+    def pattern(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """Index pairs of the blocks: (faces, dofs (n, 12)) of 'fu' and 'uf', (faces, faces) of 'ff'."""
+        e, s = np.nonzero(self.valid)
+        e2, s2, r2 = np.nonzero(self.valid[:, :, None] & self.valid[:, None, :])
+        return (self.face[e, s], self.dofs[e]), (self.face[e2, s2], self.face[e2, r2])

@@ -219,6 +219,7 @@ class StepSolver:
                                    f"without it (-pfault_geostatic false)")
         state.sigma0 = eq.geostatic_stress(eq.local_array(ug))
         ug.destroy()
+        eq.loads.set(0.0)       # the face bubbles' load back from gravity's to that of the start
         state.u.set(0.0)
         if faults is not None:
             faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
