@@ -85,18 +85,6 @@ def _check_restart_dir(path: str) -> None:
         raise InputError(f"-pfault_restart {path}: no such run directory")
 
 
-def _check_iterative_faults(fault_settings: list) -> None:
-    """The Schur fieldsplit eliminates each face's multipliers through the 3x3 blocks the traction-jump
-    stabilisation gives a stuck face (every rank reads the same settings, so every rank raises)."""
-    if PETSc.Options().getString("pc_type", "") != "fieldsplit":
-        return
-    for f in fault_settings:
-        if f.method == "lagrange" and not f.stabilization:
-            raise InputError(f"-pfault_fault_{f.name}_stabilization false: the fieldsplit solver eliminates the "
-                             "multipliers through the stabilisation's face blocks; keep the stabilisation or "
-                             "use -pfault_solver mumps")
-
-
 def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     """The scene's settings (every rank) and the serial mesh (rank 0; None elsewhere)."""
     s = scn.read_settings(reader, options_file)
@@ -228,7 +216,6 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
             from .faults.bubbles import CellBubbles
             from .faults.faces import FaultFaces
             from .faults.interface import FaultInterface
-            _check_iterative_faults(scene.fault_settings)
             with logged("pfaultFaultSetup"):
                 fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
                 faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, scene.materials, fixed, lgmap)

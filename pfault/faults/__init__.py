@@ -2,6 +2,7 @@
 
 - ``settings``: what a scene asks of each fault (friction, method) and of the contact law;
 - ``contact``: the contact laws per face, pure NumPy (semismooth Lagrange rows, penalty);
-- ``stabilization``: the traction-jump stabilisation of the P1-P0 multipliers;
+- ``bubbles``: the face bubbles of the fault faces' cells and their static condensation (NumPy kernels);
+- ``faces``: the faces on the distributed mesh, their cells and dofs on both sides;
 - ``interface``: the faces on the distributed mesh, their dofs, residual rows and Jacobian blocks.
 """

@@ -40,7 +40,7 @@ def progress_line(step: int, rec: dict) -> str:
         why = f"reason {rec['reason']}"
         if rec.get("null_pivots"):
             why += (f"; singular Jacobian: {rec['null_pivots']} null pivots, part of the body held by nothing "
-                    "but open or unstabilised fault faces")
+                    "but open fault faces")
         extra += f"  NOT CONVERGED ({why})"
     return (f"step {step:4d} t = {format_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
             f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
