@@ -162,11 +162,7 @@ def _source(scene: Scene, mesh: Any) -> Any:
 def _dofmap(scene: Scene, mesh: Any, fault_id: Any) -> Any:
     if not scene.fault_settings:
         return fields.build(mesh)
-    lm_faces = None
-    if any(f.method == "lagrange" for f in scene.fault_settings):
-        fid = mesh.cell_fault_face
-        is_lag = np.array([f.method == "lagrange" for f in scene.fault_settings])
-        lm_faces = ((fid >= 0) & is_lag[np.where(fid >= 0, fault_id[np.maximum(fid, 0)], 0)]).sum(axis=1)
+    lm_faces = (mesh.cell_fault_face >= 0).sum(axis=1)     # 3 multipliers per fault face, on its minus cell
     return fields.build(mesh, vert_sides=mesh.vert_sides, cell_side=mesh.cell_side, cell_multipliers=lm_faces)
 
 
@@ -219,7 +215,7 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
             with logged("pfaultFaultSetup"):
                 fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
                 faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, scene.materials, fixed, lgmap)
-                bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, faces.lagrange, dofmap.cell_dofs, fixed,
+                bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, np.ones(faces.nf, bool), dofmap.cell_dofs, fixed,
                                       (assembler.grad, assembler.vol, assembler.lam, assembler.mu), faces.area,
                                       faces.R, lgmap.apply, PETSc.IntType)
                 faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact, bubbles)

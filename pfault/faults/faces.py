@@ -34,7 +34,7 @@ class FaceSides:
 class FaceDofs:
     """Displacement dofs of the face's vertices on both sides: local ``u`` (nf, 18, minus side first) and
     global ``g_u``, whether each is free (``u_free``: constrained dofs take no force), the jump's sign of each
-    (plus - minus), and the multipliers' global dofs ``g_lm`` (-1 on penalty faces)."""
+    (plus - minus), and the multipliers' global dofs ``g_lm``."""
     u: np.ndarray
     g_u: np.ndarray
     u_free: np.ndarray
@@ -54,7 +54,7 @@ class FaultFaces:
     """The owned fault faces (serial ids ``face``, ordered; ``nf`` of ``nf_total``): minus cell ``cell``, both
     cells ``sides``, vertices, area, unit normal (minus -> plus) and local frames ``R``, the fault of each face and
     whether it is a Lagrange face, the modulus of the minus cell, the displacement dofs of both sides ``dofs`` and
-    the local multiplier dofs ``lm_dofs`` (-1 on penalty faces)."""
+    the local multiplier dofs ``lm_dofs`` (every face carries its traction as 3 multipliers)."""
 
     def __init__(self, mesh: Any, dofmap: Any, settings: list, fault_id: np.ndarray, materials: list,
                  bc_local: np.ndarray, lgmap: Any) -> None:
@@ -78,9 +78,8 @@ class FaultFaces:
         self.normal = an / np.maximum(self.area, 1e-300)[:, None]
         self.R = ct.local_frames(self.normal) if nf else np.zeros((0, 3, 3))
         self.lagrange = np.array([s.method == "lagrange" for s in settings])[self.fault]
-        self.has_lagrange = any(s.method == "lagrange" for s in settings)
         self.young = np.array([m.young_modulus for m in materials])[mesh.cell_material[self.cell]]
-        self.lm_dofs = self._multiplier_dofs(mesh, dofmap, fault_id)
+        self.lm_dofs = self._multiplier_dofs(mesh, dofmap)
         self.dofs = self._dofs(dofmap, bc_local, lgmap)
         ids = np.concatenate(self.mpi.allgather(self.face)) if self.nf_total else np.zeros(0, np.int64)
         self.all_ids = ids.astype(np.int64)          # serial ids of all ranks' faces, in allgather order
@@ -92,17 +91,14 @@ class FaultFaces:
         """Size of each face (m): the square root of its area."""
         return np.sqrt(self.area)
 
-    def _multiplier_dofs(self, mesh: Any, dofmap: Any, fault_id: np.ndarray) -> np.ndarray:
-        """Local multiplier dofs (nf, 3), -1 on penalty faces. The minus cell carries 3 dofs per Lagrange face it
-        is the minus cell of (pfault.model), in local-face order."""
-        lag_fault = np.array([st.method == "lagrange" for st in self.settings])
+    def _multiplier_dofs(self, mesh: Any, dofmap: Any) -> np.ndarray:
+        """Local multiplier dofs (nf, 3): the minus cell carries 3 dofs per fault face it is the minus cell of
+        (pfault.model), in local-face order."""
         slot = np.zeros(self.nf, np.int64)
         if self.nf:
-            fid = mesh.cell_fault_face[self.cell]
-            lag_at = (fid >= 0) & lag_fault[fault_id[np.maximum(fid, 0)]]
-            slot = (lag_at & (np.arange(4)[None, :] < self.sides.lface[:, :1])).sum(axis=1)
-        return np.where(self.lagrange[:, None], dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None]
-                        + np.arange(3), -1)
+            at = mesh.cell_fault_face[self.cell] >= 0
+            slot = (at & (np.arange(4)[None, :] < self.sides.lface[:, :1])).sum(axis=1)
+        return dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None] + np.arange(3)
 
     def _dofs(self, dofmap: Any, bc_local: np.ndarray, lgmap: Any) -> FaceDofs:
         nf = self.nf
@@ -136,16 +132,11 @@ class FaultFaces:
     def insert_pattern(self, J: Any) -> None:
         """Insert explicit zeros where the interface blocks within the faces' vertices go (for exact
         preallocation; the bubbles' blocks beyond them are pfault.faults.interface's pattern)."""
-        lag = np.nonzero(self.lagrange)[0]
-        n = len(lag)
-        d = self.dofs
+        n, d = self.nf, self.dofs
         if n:
-            J.setValuesRCV(d.g_u[lag], d.g_lm[lag], np.zeros((n, 54)), addv=ADD)
-            J.setValuesRCV(d.g_lm[lag], d.g_u[lag], np.zeros((n, 54)), addv=ADD)
-            J.setValuesRCV(d.g_lm[lag], d.g_lm[lag], np.zeros((n, 9)), addv=ADD)
-        pen = np.nonzero(~self.lagrange)[0]
-        if len(pen):   # both sides' dofs of a penalty face
-            J.setValuesRCV(d.g_u[pen], d.g_u[pen], np.zeros((len(pen), 324)), addv=ADD)
+            J.setValuesRCV(d.g_u, d.g_lm, np.zeros((n, 54)), addv=ADD)
+            J.setValuesRCV(d.g_lm, d.g_u, np.zeros((n, 54)), addv=ADD)
+            J.setValuesRCV(d.g_lm, d.g_lm, np.zeros((n, 9)), addv=ADD)
 
 
 def _sides(mesh: Any, cell: np.ndarray, lface: np.ndarray, verts: np.ndarray) -> tuple[FaceSides, bool]:

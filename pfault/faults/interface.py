@@ -58,7 +58,12 @@ class StepStart:
 class FaultInterface:
     """The contact laws of all faults on the faces this rank owns (``faces``): their residual rows and Jacobian
     blocks, and each face's history (initial traction ``t0``, the pore pressure its law sees ``pn``, the start
-    of the step ``start``). ``bubbles``: the condensed face bubbles of the Lagrange faces' cells."""
+    of the step ``start``). ``bubbles``: the condensed face bubbles of the faces' cells.
+
+    Every face carries its traction as 3 multipliers: a Lagrange face's rows are the semismooth contact law's, a
+    penalty face's say that the multiplier is the penalty law's traction of the jump (a perturbed Lagrangian),
+    so both laws act on the same jump, with its bubble part, and penalty faces tend to Lagrange faces as their
+    stiffness grows."""
 
     def __init__(self, faces: FaultFaces, settings: list, topology: FaultTopology, contact: Any,
                  bubbles: CellBubbles) -> None:
@@ -92,8 +97,8 @@ class FaultInterface:
         return te
 
     def _penalty(self, gl: np.ndarray, state: np.ndarray | None = None) -> tuple:
-        """Penalty faces' total traction, its derivative and state (zero rows for Lagrange faces). ``state``:
-        the branches to take instead of the return map's (stick or open)."""
+        """Penalty faces' law: total traction of their jumps ``gl``, its derivative and state (zero rows for
+        Lagrange faces). ``state``: the branches to take instead of the return map's (stick or open)."""
         pen = ~self.faces.lagrange
         t, d = np.zeros((self.faces.nf, 3)), np.zeros((self.faces.nf, 3, 3))
         st = np.full(self.faces.nf, ct.STICK)
@@ -106,22 +111,15 @@ class FaultInterface:
             t[pen, 0] -= self.pn[pen]
         return t, d, st
 
-    def tractions(self, x_loc: np.ndarray, gl: np.ndarray | None = None, state: np.ndarray | None = None
-                  ) -> np.ndarray:
-        """Total traction of every owned face (local frame): the multiplier, or the penalty law's (of the P1
-        jump ``gl``, in the branches ``state`` if given)."""
-        if gl is None:
-            gl = self.faces.jumps(x_loc)[1]
-        t = self._penalty(gl, state)[0]
-        lag = self.faces.lagrange
-        t[lag] = x_loc[self.faces.lm_dofs[lag]]
-        return t
+    def tractions(self, x_loc: np.ndarray) -> np.ndarray:
+        """Total traction of every owned face (local frame): its multipliers."""
+        return x_loc[self.faces.lm_dofs]
 
     def law_jumps(self, x_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The jumps the laws act on, global and local (nf, 3): the face-mean jump with its bubble part on
-        Lagrange faces, the P1 one on penalty faces; and the total tractions."""
+        """The jumps the laws act on, global and local (nf, 3): the face-mean jump with its bubble part; and the
+        total tractions."""
+        t = self.tractions(x_loc)
         gl = self.faces.jumps(x_loc)[1]
-        t = self.tractions(x_loc, gl)
         gl = gl + self.bubbles.jump(x_loc, t - self.t0) / np.maximum(self.faces.area, 1e-300)[:, None]
         return np.einsum("nji,nj->ni", self.faces.R, gl), gl, t
 
@@ -137,11 +135,10 @@ class FaultInterface:
         self.start = StepStart(g, t, self.states(x_loc, exact=True))
 
     def start_from(self, x_loc: np.ndarray, t: np.ndarray) -> None:
-        """Start the faces' laws at the state x_loc from the total tractions ``t`` (owned faces, local frame):
-        the initial traction t0 of a geostatic state, or the tractions a checkpoint recorded. A penalty face's
-        tangential traction is its history's return map, not a function of its jump; Lagrange faces read
-        theirs from their multipliers. Then ``begin_step`` at x_loc (which reads the penalty faces' start only)."""
-        self.start = StepStart(self.faces.jumps(x_loc)[1], np.array(t, dtype=float), self.start.state)
+        """Start the faces' laws at the state x_loc from the total tractions ``t`` (owned faces, local frame; the
+        multipliers of x_loc): the initial traction t0 of a geostatic state, or the tractions a checkpoint
+        recorded."""
+        self.start = StepStart(self.law_jumps(x_loc)[1], np.array(t, dtype=float), self.start.state)
         self.begin_step(x_loc)
 
     def initial_tractions(self, sigma0: np.ndarray) -> np.ndarray:
@@ -154,13 +151,7 @@ class FaultInterface:
     def states(self, x_loc: np.ndarray, exact: bool = False) -> np.ndarray:
         """Stick/slip/open of every owned face at the iterate x_loc. ``exact``: the branches the residual takes;
         otherwise as reported: a face within round-off (1e-9 E) of a switch counts as closed and stuck."""
-        _, gl, t = self.law_jumps(x_loc)
-        st = self._penalty(self.faces.jumps(x_loc)[1])[2]
-        lag = self.faces.lagrange
-        if np.any(lag):
-            tol = 0.0 if exact else 1e-9 * self.faces.young[lag]
-            st[lag] = ct.states(self.law[lag], gl[lag], self.start.g[lag], self.effective(t)[lag], tol)
-        return st
+        return self._law_terms(x_loc, tol=0.0 if exact else 1e-9)[0]
 
     def counts_by_state(self, x_loc: np.ndarray) -> dict:
         st = self.states(x_loc)
@@ -168,53 +159,54 @@ class FaultInterface:
         return {name: int(c[i]) for i, name in enumerate(ct.STATE_NAMES)}
 
     # -- residual and Jacobian ------------------------------------------------------------------
-    def _lagrange_terms(self, x_loc: np.ndarray, state: np.ndarray | None = None) -> tuple:
-        """Owned Lagrange faces: (indices, states, rows, dr/dg, dr/dt) of their laws, which take the mean jump
-        with its bubble part. ``state`` (owned faces): the branches to take instead of the iterate's."""
+    def _law_terms(self, x_loc: np.ndarray, state: np.ndarray | None = None, tol: float = 0.0) -> tuple:
+        """Every owned face's (state, rows r, dr/dg, dr/dt) (forces, local frame), its law taking the mean jump
+        with its bubble part. Lagrange faces: the semismooth rows; penalty faces: r = A (t - t_pen(g)), the
+        multiplier equal to the penalty law's traction. ``state``: the branches to take instead of the
+        iterate's; ``tol``: relative to E, the states' reporting tolerance (``states``)."""
+        fc = self.faces
         _, gl, t = self.law_jumps(x_loc)
-        idx = np.nonzero(self.faces.lagrange)[0]
-        st, r, dg, dt = ct.lagrange_rows(self.law[idx], gl[idx], self.start.g[idx], self.effective(t)[idx],
-                                         None if state is None else state[idx])
-        return idx, st, r, dg, dt
+        idx = np.nonzero(fc.lagrange)[0]
+        t_pen, d_pen, st = self._penalty(gl, state)
+        A = fc.area[:, None, None]
+        r = (t - t_pen) * fc.area[:, None]
+        dg, dt = -A * d_pen, A * np.eye(3)[None]
+        if tol > 0 and len(idx):
+            st[idx] = ct.states(self.law[idx], gl[idx], self.start.g[idx], self.effective(t)[idx],
+                                tol * fc.young[idx])
+            return st, r, dg, dt
+        st[idx], r[idx], dg[idx], dt[idx] = ct.lagrange_rows(self.law[idx], gl[idx], self.start.g[idx],
+                                                             self.effective(t)[idx],
+                                                             None if state is None else state[idx])
+        return st, r, dg, dt
 
     def residual(self, x_loc: np.ndarray, out: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
         """Add the interface terms to the local residual array ``out``; returns the owned faces' states.
         ``state``: the faces' branches to take instead of the iterate's (stick or open)."""
         with logged("pfaultFaultResidual"):
             fc = self.faces
-            gl = fc.jumps(x_loc)[1]
-            dt = self.tractions(x_loc, gl, state) - self.t0
+            dt = self.tractions(x_loc) - self.t0
             # forces on the displacement dofs from the traction change (the initial traction is in equilibrium
             # with the initial stress): minus side -(A/3) R^T dt, plus side +(A/3) R^T dt; and through the bubbles
             force = np.einsum("nji,nj->ni", fc.R, dt) * (fc.area / 3.0)[:, None]
             fu = fc.dofs.sign[None, :] * np.tile(force, (1, 6)) * fc.dofs.u_free
             out += np.bincount(fc.dofs.u.ravel(), weights=fu.ravel(), minlength=len(out))
-            self.bubbles.forces(np.where(fc.lagrange[:, None], dt, 0.0), out)
-            out_state = self._penalty(gl, state)[2]
-            idx, st, r, _, _ = self._lagrange_terms(x_loc, state)
-            out_state[idx] = st
-            out += np.bincount(fc.lm_dofs[idx].ravel(), weights=r.ravel(), minlength=len(out))
-            return out_state
+            self.bubbles.forces(dt, out)
+            st, r, _, _ = self._law_terms(x_loc, state)
+            out += np.bincount(fc.lm_dofs.ravel(), weights=r.ravel(), minlength=len(out))
+            return st
 
     def add_jacobian(self, x_loc: np.ndarray, J: Any, state: np.ndarray | None = None, glued: bool = False
                      ) -> np.ndarray:
         """Add the interface blocks to J (global indices); returns the owned faces' states. ``state``: the
         faces' branches to take instead of the iterate's (stick or open); ``glued``: every face stuck whatever
-        x_loc (the penalty and Lagrange laws' stick branches)."""
+        x_loc (the laws' stick branches)."""
         with logged("pfaultFaultJacobian"):
-            fc = self.faces
-            _, d, out_state = self._penalty(fc.jumps(x_loc)[1], state)
             if glued:
-                law = self.penalty_law
-                d = np.stack([law.c_n, law.c_t, law.c_t], axis=1)[:, :, None] * np.eye(3)[None]
-                state = np.full(fc.nf, ct.STICK)
-            idx, st, _, dg, dt = self._lagrange_terms(x_loc, state)
-            out_state[idx] = st
-            self._add_lagrange_blocks(J, idx, dg, dt)
-            pen = np.nonzero(~fc.lagrange)[0]
-            if len(pen):
-                self._add_penalty_blocks(J, pen, d[pen])
-            return out_state
+                state = np.full(self.faces.nf, ct.STICK)
+            st, _, dg, dt = self._law_terms(x_loc, state)
+            self._add_blocks(J, dg, dt)
+            return st
 
     def add_stiffness(self, K: Any, blocked: bool) -> None:
         """Add what the condensed bubbles add to their cells' stiffness, -K_ub K_bb^-1 K_bu, to K (local numbering;
@@ -241,29 +233,30 @@ class FaultInterface:
 
     def glued_load(self, out: np.ndarray) -> None:
         """Add to the multiplier rows of the local array ``out`` the right-hand side of the glued faces' rows
-        for the bubbles' load last set (their stick rows -c A g, with the load's part of A g)."""
-        idx = np.nonzero(self.faces.lagrange)[0]
-        law = self.law[idx]
+        for the bubbles' load last set (their stick rows -c A g, c the augmentation or penalty stiffness, with
+        the load's part of A g)."""
+        law = self.law
         c = np.stack([law.c_n, law.c_t, law.c_t], axis=1)
-        out[self.faces.lm_dofs[idx]] += c * self.bubbles.jump_of_load()[idx]
+        pen = self.penalty_law
+        c = np.where(self.faces.lagrange[:, None], c, np.stack([pen.c_n, pen.c_t, pen.c_t], axis=1))
+        out[self.faces.lm_dofs] += c * self.bubbles.jump_of_load()
 
-    def _add_lagrange_blocks(self, J: Any, idx: np.ndarray, dg: np.ndarray, dt: np.ndarray) -> None:
-        """Blocks of Lagrange faces ``idx``: forces on the displacement rows, d force/d t = sign A/3 R^T, and the
-        constraint rows' dr/du = dr/dg_loc R (1/3) sign and dr/dt; then those through the bubbles."""
-        n = len(idx)
+    def _add_blocks(self, J: Any, dg: np.ndarray, dt: np.ndarray) -> None:
+        """The faces' blocks: forces on the displacement rows, d force/d t = sign A/3 R^T, and the rows'
+        dr/du = dr/dg_loc R (1/3) sign and dr/dt; then those through the bubbles."""
+        fc, d = self.faces, self.faces.dofs
+        n = fc.nf
         if n == 0:
             return      # (petsc4py's setValuesRCV divides by the number of rows)
-        fc, d = self.faces, self.faces.dofs
         sign = d.sign.reshape(6, 3)[:, 0]
-        blk = (sign[None, :, None, None] * (fc.area[idx] / 3.0)[:, None, None, None]
-               * np.transpose(fc.R[idx], (0, 2, 1))[:, None, :, :]).reshape(n, 18, 3)
-        J.setValuesRCV(d.g_u[idx], d.g_lm[idx], (blk * d.u_free[idx][:, :, None]).reshape(n, 54), addv=ADD)
-        drdg = np.einsum("nij,njk->nik", dg, fc.R[idx]) / 3.0
-        blk = (sign[None, None, :, None] * drdg[:, :, None, :]).reshape(n, 3, 18) * d.u_free[idx][:, None, :]
-        J.setValuesRCV(d.g_lm[idx], d.g_u[idx], blk.reshape(n, 54), addv=ADD)
-        J.setValuesRCV(d.g_lm[idx], d.g_lm[idx], dt.reshape(n, 9), addv=ADD)
-        per_area = np.zeros((fc.nf, 3, 3))
-        per_area[idx] = dg / np.maximum(fc.area[idx], 1e-300)[:, None, None]    # d r / d(A g)
+        blk = (sign[None, :, None, None] * (fc.area / 3.0)[:, None, None, None]
+               * np.transpose(fc.R, (0, 2, 1))[:, None, :, :]).reshape(n, 18, 3)
+        J.setValuesRCV(d.g_u, d.g_lm, (blk * d.u_free[:, :, None]).reshape(n, 54), addv=ADD)
+        drdg = np.einsum("nij,njk->nik", dg, fc.R) / 3.0
+        blk = (sign[None, None, :, None] * drdg[:, :, None, :]).reshape(n, 3, 18) * d.u_free[:, None, :]
+        J.setValuesRCV(d.g_lm, d.g_u, blk.reshape(n, 54), addv=ADD)
+        J.setValuesRCV(d.g_lm, d.g_lm, dt.reshape(n, 9), addv=ADD)
+        per_area = dg / np.maximum(fc.area, 1e-300)[:, None, None]       # d r / d(A g)
         for kind, rows, cols, vals in self.bubbles.jacobian_blocks(per_area):
             if len(rows) == 0:
                 continue
@@ -276,21 +269,10 @@ class FaultInterface:
             J.setValuesRCV(rows.astype(PETSc.IntType), cols.astype(PETSc.IntType), vals.reshape(len(vals), -1),
                            addv=ADD)
 
-    def _add_penalty_blocks(self, J: Any, pen: np.ndarray, d: np.ndarray) -> None:
-        """Blocks of penalty faces ``pen`` with traction derivative d = dt/dg_loc (n,3,3):
-        force = A/3 R^T t(g_loc), g_loc = R (1/3) sum sign u."""
-        fc, dof = self.faces, self.faces.dofs
-        sign = dof.sign.reshape(6, 3)[:, 0]
-        dfdg = np.einsum("nji,njk,nkl->nil", fc.R[pen], d, fc.R[pen]) * (fc.area[pen] / 9.0)[:, None, None]
-        blk = sign[None, :, None, None, None] * sign[None, None, None, :, None] * dfdg[:, None, :, None, :]
-        mask = dof.u_free[pen]
-        blk = blk.reshape(len(pen), 18, 18) * mask[:, :, None] * mask[:, None, :]
-        J.setValuesRCV(dof.g_u[pen], dof.g_u[pen], blk.reshape(len(pen), 324), addv=ADD)
-
     def jacobian_varies(self, state: np.ndarray) -> bool:
         """Whether the Jacobian depends on the iterate beyond the faces' states (slipping or penalty faces),
         on all ranks."""
-        local = bool(np.any(state == ct.SLIP) or np.any(~self.faces.lagrange))
+        local = bool(np.any(state == ct.SLIP) or np.any(~self.faces.lagrange))    # (the penalty law is not affine)
         return self.faces.mpi.allreduce(local, op=MPI.LOR)
 
     def pattern(self) -> tuple[np.ndarray, np.ndarray]:
@@ -305,7 +287,7 @@ class FaultInterface:
     # -- output -----------------------------------------------------------------------------------
     def face_fields(self, x_loc: np.ndarray) -> tuple:
         """Per owned face: traction local (3), jump local (3), traction global (3), slip global (3), state. The
-        jump is the one the law acts on (the face-mean jump with its bubble part on Lagrange faces)."""
+        jump is the one the law acts on: the face-mean jump with its bubble part."""
         g, gl, t = self.law_jumps(x_loc)
         tg = np.einsum("nji,nj->ni", self.faces.R, t)
         slip_global = g - gl[:, :1] * self.faces.normal

@@ -26,19 +26,19 @@ class FieldSplit:
     where a fault holds a body (pfault/solver/options/iterative.opts). Where faces share a cell their blocks
     couple; only each face's own 3x3 block is used.
 
-    A scene without faults, or whose faults are all penalty faults, has no multiplier field: the whole unknown
-    is the displacement, and the PC becomes the displacement split's (its options, -fieldsplit_displacement_*)."""
+    A scene without faults has no multiplier field (every fault face, Lagrange or penalty, carries its traction
+    as multipliers): the whole unknown is the displacement, and the PC becomes the displacement split's (its options, -fieldsplit_displacement_*)."""
 
     def __init__(self, equations: Any, pc: Any) -> None:
         self.objects: list = []
         if pc.getType() != PETSc.PC.Type.FIELDSPLIT:
             return
         f = equations.faults
-        if f is None or not f.faces.has_lagrange:
+        if f is None:
             _displacement_only(pc)
             return
         loc = np.zeros(equations.dofmap.n_local)
-        loc[f.faces.lm_dofs[np.nonzero(f.faces.lagrange)[0]].ravel()] = 1.0
+        loc[f.faces.lm_dofs.ravel()] = 1.0
         g = equations.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
         start, _ = g.getOwnershipRange()
         mark = g.getArray() > 0.5

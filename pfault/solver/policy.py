@@ -225,8 +225,7 @@ class StepSolver:
             faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
             faults.t0 = faults.initial_tractions(state.sigma0)
             loc = eq.local_array(state.u)
-            lag = np.nonzero(faults.faces.lagrange)[0]
-            loc[faults.faces.lm_dofs[lag]] = faults.t0[lag]
+            loc[faults.faces.lm_dofs] = faults.t0
             eq.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=state.u)
             faults.start_from(loc, faults.t0)     # penalty faces too: their shear starts from the initial one
 
