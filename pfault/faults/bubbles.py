@@ -136,7 +136,7 @@ class Condensed:
     def bubbles(self, ue: np.ndarray, dt: np.ndarray, fb: np.ndarray) -> np.ndarray:
         """Bubble dofs b (n, 3m) of cells with P1 dofs ue (n, 12), slot tractions' changes dt (n, m, 3) and loads
         fb (n, 3m)."""
-        rhs = fb - np.einsum("nai,na->ni", self.kub, ue) - np.einsum("nsji,nsj->nsi", self.c, dt).reshape(len(ue), -1)
+        rhs = fb - np.einsum("nai,na->ni", self.kub, ue) - np.einsum("nsji,nsj->nsi", self.c, dt).reshape(len(ue), 3 * self.slots)
         return np.einsum("nij,nj->ni", self.kbb_inv, rhs)
 
 
@@ -153,13 +153,13 @@ def pore_pressure_bubble_load(grad: np.ndarray, vol: np.ndarray, alpha_dp: np.nd
                               ) -> np.ndarray:
     """Biot load of the bubbles, alpha dp int div(phi e_i) = alpha dp (9/20) A n_out (n, 3m), as
     elasticity.pore_pressure_force for the P1 functions."""
-    return (alpha_dp[:, None, None] * bubble_gradient_mean(grad, vol, lface)).reshape(len(vol), -1)
+    return (alpha_dp[:, None, None] * bubble_gradient_mean(grad, vol, lface)).reshape(len(vol), 3 * lface.shape[1])
 
 
 def body_bubble_load(vol: np.ndarray, b: np.ndarray, lface: np.ndarray) -> np.ndarray:
     """Load of a constant body force b (n, 3) per cell on the bubbles: (9/40) V b each (n, 3m)."""
     f = (VOLUME_MEAN * vol[:, None] * b)[:, None, :] * (lface >= 0)[:, :, None]
-    return f.reshape(len(vol), -1)
+    return f.reshape(len(vol), 3 * lface.shape[1])
 
 
 class CellBubbles:

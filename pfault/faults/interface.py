@@ -60,10 +60,9 @@ class FaultInterface:
     blocks, and each face's history (initial traction ``t0``, the pore pressure its law sees ``pn``, the start
     of the step ``start``). ``bubbles``: the condensed face bubbles of the faces' cells.
 
-    Every face carries its traction as 3 multipliers: a Lagrange face's rows are the semismooth contact law's, a
-    penalty face's say that the multiplier is the penalty law's traction of the jump (a perturbed Lagrangian),
-    so both laws act on the same jump, with its bubble part, and penalty faces tend to Lagrange faces as their
-    stiffness grows."""
+    Every face carries its traction as 3 multipliers, and its rows are the semismooth contact law's; a penalty face's
+    law takes its jump less the penalty's compliance (a perturbed Lagrangian, ``_law_jumps``), so both laws act on the
+    same jump, with its bubble part, and penalty faces tend to Lagrange faces as their stiffness grows."""
 
     def __init__(self, faces: FaultFaces, settings: list, topology: FaultTopology, contact: Any,
                  bubbles: CellBubbles) -> None:
@@ -96,21 +95,6 @@ class FaultInterface:
         te[:, 0] += self.pn
         return te
 
-    def _penalty(self, gl: np.ndarray, state: np.ndarray | None = None) -> tuple:
-        """Penalty faces' law: total traction of their jumps ``gl``, its derivative and state (zero rows for
-        Lagrange faces). ``state``: the branches to take instead of the return map's (stick or open)."""
-        pen = ~self.faces.lagrange
-        t, d = np.zeros((self.faces.nf, 3)), np.zeros((self.faces.nf, 3, 3))
-        st = np.full(self.faces.nf, ct.STICK)
-        if np.any(pen):
-            # the penalty law acts on the effective traction; the faces receive the total one
-            t[pen], d[pen], st[pen] = ct.penalty_traction(self.penalty_law[pen], gl[pen], self.start.g[pen],
-                                                          self.effective(self.start.t)[pen],
-                                                          self.t0[pen, 0] + self.pn[pen],
-                                                          None if state is None else state[pen])
-            t[pen, 0] -= self.pn[pen]
-        return t, d, st
-
     def tractions(self, x_loc: np.ndarray) -> np.ndarray:
         """Total traction of every owned face (local frame): its multipliers."""
         return x_loc[self.faces.lm_dofs]
@@ -123,6 +107,20 @@ class FaultInterface:
         gl = gl + self.bubbles.jump(x_loc, t - self.t0) / np.maximum(self.faces.area, 1e-300)[:, None]
         return np.einsum("nji,nj->ni", self.faces.R, gl), gl, t
 
+    def _law_jumps(self, x_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The jumps the laws take (local frame) and the total tractions. A penalty face's is its jump less the
+        penalty's compliance, g - (t_eff - t0_eff) / k with t0_eff the initial normal traction (tangential: t_T / k,
+        measured from the step's start like g_T): its Lagrange rows then hold t_N = t0_N + k g_N while closed and
+        t_T = t_T^n + k dg_T while stuck, and slip along the return map's trial t_T^n + k dg_T, the penalty law."""
+        _, gl, t = self.law_jumps(x_loc)
+        pen = ~self.faces.lagrange
+        if np.any(pen):
+            law = self.penalty_law[pen]
+            te = self.effective(t[pen])
+            te[:, 0] -= self.t0[pen, 0] + self.pn[pen]
+            gl[pen] -= te / np.stack([law.c_n, law.c_t, law.c_t], axis=1)
+        return gl, t
+
     def set_pore_pressure(self, alpha_p: np.ndarray) -> None:
         """alpha p (Pa, compression positive) at each owned face for the contact laws."""
         self.pn = np.asarray(alpha_p, dtype=float).copy()
@@ -130,7 +128,7 @@ class FaultInterface:
     def begin_step(self, x_loc: np.ndarray) -> None:
         """Record the converged state ``x_loc`` (under the pore pressure it was solved for) as the start of the
         next step."""
-        _, g, t = self.law_jumps(x_loc)
+        g, t = self._law_jumps(x_loc)
         self.start = StepStart(g, t, self.start.state)     # the states are measured from this start
         self.start = StepStart(g, t, self.states(x_loc, exact=True))
 
@@ -138,7 +136,7 @@ class FaultInterface:
         """Start the faces' laws at the state x_loc from the total tractions ``t`` (owned faces, local frame; the
         multipliers of x_loc): the initial traction t0 of a geostatic state, or the tractions a checkpoint
         recorded."""
-        self.start = StepStart(self.law_jumps(x_loc)[1], np.array(t, dtype=float), self.start.state)
+        self.start = StepStart(self._law_jumps(x_loc)[0], np.array(t, dtype=float), self.start.state)
         self.begin_step(x_loc)
 
     def initial_tractions(self, sigma0: np.ndarray) -> np.ndarray:
@@ -160,24 +158,20 @@ class FaultInterface:
 
     # -- residual and Jacobian ------------------------------------------------------------------
     def _law_terms(self, x_loc: np.ndarray, state: np.ndarray | None = None, tol: float = 0.0) -> tuple:
-        """Every owned face's (state, rows r, dr/dg, dr/dt) (forces, local frame), its law taking the mean jump
-        with its bubble part. Lagrange faces: the semismooth rows; penalty faces: r = A (t - t_pen(g)), the
-        multiplier equal to the penalty law's traction. ``state``: the branches to take instead of the
-        iterate's; ``tol``: relative to E, the states' reporting tolerance (``states``)."""
+        """Every owned face's (state, rows r, dr/dg, dr/dt) (forces, local frame; g the face-mean jump with its
+        bubble part): the semismooth Lagrange rows on the jumps of ``_law_jumps``, whose penalty faces' part in t
+        adds to dr/dt. ``state``: the branches to take instead of the iterate's; ``tol``: relative to E, the
+        states' reporting tolerance (``states``)."""
         fc = self.faces
-        _, gl, t = self.law_jumps(x_loc)
-        idx = np.nonzero(fc.lagrange)[0]
-        t_pen, d_pen, st = self._penalty(gl, state)
-        A = fc.area[:, None, None]
-        r = (t - t_pen) * fc.area[:, None]
-        dg, dt = -A * d_pen, A * np.eye(3)[None]
-        if tol > 0 and len(idx):
-            st[idx] = ct.states(self.law[idx], gl[idx], self.start.g[idx], self.effective(t)[idx],
-                                tol * fc.young[idx])
-            return st, r, dg, dt
-        st[idx], r[idx], dg[idx], dt[idx] = ct.lagrange_rows(self.law[idx], gl[idx], self.start.g[idx],
-                                                             self.effective(t)[idx],
-                                                             None if state is None else state[idx])
+        gl, t = self._law_jumps(x_loc)
+        if tol > 0:
+            st = ct.states(self.law, gl, self.start.g, self.effective(t), tol * fc.young)
+            return st, None, None, None
+        st, r, dg, dt = ct.lagrange_rows(self.law, gl, self.start.g, self.effective(t), state)
+        pen = ~fc.lagrange
+        if np.any(pen):
+            law = self.penalty_law[pen]
+            dt[pen] -= dg[pen] / np.stack([law.c_n, law.c_t, law.c_t], axis=1)[:, None, :]
         return st, r, dg, dt
 
     def residual(self, x_loc: np.ndarray, out: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
@@ -233,13 +227,9 @@ class FaultInterface:
 
     def glued_load(self, out: np.ndarray) -> None:
         """Add to the multiplier rows of the local array ``out`` the right-hand side of the glued faces' rows
-        for the bubbles' load last set (their stick rows -c A g, c the augmentation or penalty stiffness, with
-        the load's part of A g)."""
+        for the bubbles' load last set (their stick rows -c A g, with the load's part of A g)."""
         law = self.law
-        c = np.stack([law.c_n, law.c_t, law.c_t], axis=1)
-        pen = self.penalty_law
-        c = np.where(self.faces.lagrange[:, None], c, np.stack([pen.c_n, pen.c_t, pen.c_t], axis=1))
-        out[self.faces.lm_dofs] += c * self.bubbles.jump_of_load()
+        out[self.faces.lm_dofs] += np.stack([law.c_n, law.c_t, law.c_t], axis=1) * self.bubbles.jump_of_load()
 
     def _add_blocks(self, J: Any, dg: np.ndarray, dt: np.ndarray) -> None:
         """The faces' blocks: forces on the displacement rows, d force/d t = sign A/3 R^T, and the rows'

@@ -360,31 +360,26 @@ def test_penalty_converges_at_high_stiffness(runs):
     assert jump_error(f) * 1e10 == pytest.approx(math.hypot(P, TAU_STICK), rel=0.1)
 
 
-def test_penalty_stiffness_degrades_krylov_convergence():
-    """Stick-state Jacobian solved by GMRES(30), rtol 1e-10, 5000 iterations at most, 8x4x4 mesh, 1 rank.
-
-    Measured (Jacobi): penalty k = 1e8, 1e9, 1e10, 1e11 -> 172, 407, 1069, 5000 (budget exhausted) iterations;
-    ILU(0): 28, 29, 48, 67. Lagrange: ILU(0) 54 iterations; Jacobi breaks down on the saddle point (near-zero
-    multiplier diagonal), so it is not the preconditioner to compare the methods with. The penalty solutions have
-    jump x k = 1.08e6 = |t| for all four k: the 1/k law holds to k = 1e11 when the contact starts closed.
-    """
+def test_penalty_stiffness_keeps_krylov_convergence():
+    """Stick-state Jacobian solved by GMRES(30) + ILU(0), rtol 1e-10, 8x4x4 mesh, 1 rank. Penalty faces carry their
+    traction as multipliers and their law takes the jump less the penalty's compliance (a perturbed Lagrangian):
+    the Jacobian tends to the Lagrange faces' as k grows instead of growing with k. Measured: 27-28
+    iterations at k = 1e8 ... 1e11 (Lagrange 28); with the penalty traction a function of the jump alone (no
+    multipliers) they were 28, 29, 48, 67, and Jacobi 172 to 5000. The penalty solutions have jump x k = |t|:
+    the 1/k law holds to k = 1e11."""
     extra = ["-pfault_box_cells", "8,4,4", "-pfault_bc_xmax_displacement", f"0,0,{DELTA_STICK!r}",
              *shear_tractions(TAU_STICK)]
     ks = [1e8, 1e9, 1e10, 1e11]
-    out = run_script("penalty_conditioning.py", args=["-pc", "jacobi,ilu", "-k", ",".join(f"{k:g}" for k in ks),
-                                                      *extra])
-    pen = out["penalty"]
-    its = [r["jacobi"]["ksp_its"] for r in pen]
-    assert all(a < b for a, b in zip(its, its[1:])), its            # grows with every decade of k
-    assert its[-1] >= 3 * its[0], its
-    assert all(r["jacobi"]["converged"] for r in pen[:3]), its
-    ilu = [r["ilu"]["ksp_its"] for r in pen]
-    assert all(r["ilu"]["converged"] for r in pen) and all(a <= b for a, b in zip(ilu, ilu[1:])), ilu
-    for k, r in zip(ks, pen):
-        assert r["ilu"]["max_jump_m"] * k == pytest.approx(math.hypot(P, TAU_STICK), rel=0.1), k
+    out = run_script("penalty_conditioning.py", args=["-pc", "ilu", "-k", ",".join(f"{k:g}" for k in ks), *extra])
     lag = out["lagrange"]["ilu"]
     assert lag["converged"] and lag["ksp_its"] <= 100
     assert lag["max_jump_m"] <= 1e-8
+    pen = out["penalty"]
+    its = [r["ilu"]["ksp_its"] for r in pen]
+    assert all(r["ilu"]["converged"] for r in pen), its
+    assert max(its) <= lag["ksp_its"] + 5 and max(its) - min(its) <= 5, (its, lag["ksp_its"])
+    for k, r in zip(ks, pen):
+        assert r["ilu"]["max_jump_m"] * k == pytest.approx(math.hypot(P, TAU_STICK), rel=0.1), k
 
 
 # ---------------------------------------------------------------------------------------------
