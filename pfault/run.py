@@ -54,7 +54,7 @@ def surface_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
 
 def fault_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
     """Largest opening and slip of the fault faces (relative to the initial state)."""
-    g, gl = model.faults.faces.jumps(u_rel)
+    g, gl = model.faults.relative_jumps(u_rel)
     op = float(np.max(gl[:, 0], initial=0.0))
     sl = float(np.max(np.linalg.norm(gl[:, 1:], axis=1), initial=0.0))
     mpi = model.comm.tompi4py()

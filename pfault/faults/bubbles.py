@@ -19,7 +19,8 @@ pfault.mesh.serial.TET_FACES) of each of the cell's fault faces, -1 for an empty
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from math import factorial
 
@@ -234,6 +235,16 @@ class CellBubbles:
     def body_load(self, b: np.ndarray) -> np.ndarray:
         """Bubble load of body forces b (nc, 3) per local cell."""
         return body_bubble_load(self._vol, b[self.cell], self.lface)
+
+    @contextmanager
+    def unloaded(self) -> Iterator[None]:
+        """Within: the bubbles without load (the initial state's, which loads nothing)."""
+        saved = self.fb, self.g_load
+        self.fb, self.g_load = np.zeros_like(saved[0]), np.zeros_like(saved[1])
+        try:
+            yield
+        finally:
+            self.fb, self.g_load = saved
 
     def jump_of_load(self) -> np.ndarray:
         """The load's part of each face's A g (nf, 3; local frame)."""

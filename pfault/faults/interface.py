@@ -100,12 +100,21 @@ class FaultInterface:
         return x_loc[self.faces.lm_dofs]
 
     def law_jumps(self, x_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The jumps the laws act on, global and local (nf, 3): the face-mean jump with its bubble part; and the
+        """The face-mean jumps (P1 part and bubble part), global and local (nf, 3), of the state x_loc; and the
         total tractions."""
         t = self.tractions(x_loc)
+        return (*self._mean_jumps(x_loc, t - self.t0), t)
+
+    def _mean_jumps(self, x_loc: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         gl = self.faces.jumps(x_loc)[1]
-        gl = gl + self.bubbles.jump(x_loc, t - self.t0) / np.maximum(self.faces.area, 1e-300)[:, None]
-        return np.einsum("nji,nj->ni", self.faces.R, gl), gl, t
+        gl = gl + self.bubbles.jump(x_loc, dt) / np.maximum(self.faces.area, 1e-300)[:, None]
+        return np.einsum("nji,nj->ni", self.faces.R, gl), gl
+
+    def relative_jumps(self, x_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The face-mean jumps, global and local, of a state relative to the initial one (x_rel: displacements and
+        tractions less those of the initial state, which loads nothing), under the loads last set: what is
+        reported as opening and slip. The initial state's own: within ``bubbles.unloaded()``."""
+        return self._mean_jumps(x_rel, self.tractions(x_rel))
 
     def _law_jumps(self, x_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The jumps the laws take (local frame) and the total tractions. A penalty face's is its jump less the
