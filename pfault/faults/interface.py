@@ -269,9 +269,9 @@ class FaultInterface:
                            addv=ADD)
 
     def jacobian_varies(self, state: np.ndarray) -> bool:
-        """Whether the Jacobian depends on the iterate beyond the faces' states (slipping or penalty faces),
-        on all ranks."""
-        local = bool(np.any(state == ct.SLIP) or np.any(~self.faces.lagrange))    # (the penalty law is not affine)
+        """Whether the Jacobian depends on the iterate beyond the faces' states (slipping faces), on all ranks.
+        Penalty faces' rows are the Lagrange rows on a jump affine in the tractions: as those, affine per state."""
+        local = bool(np.any(state == ct.SLIP))
         return self.faces.mpi.allreduce(local, op=MPI.LOR)
 
     def pattern(self) -> tuple[np.ndarray, np.ndarray]:
