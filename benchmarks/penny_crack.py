@@ -23,7 +23,7 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
-from penny_mesh import crack_errors, make_penny_mesh, read_fault_step  # noqa: E402
+from penny_mesh import crack_errors, make_penny_mesh  # noqa: E402
 from studies.run import read_summary, run_captured  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "penny_crack.opts")

@@ -159,7 +159,7 @@ def _source(scene: Scene, mesh: Any) -> Any:
                                       substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity))
 
 
-def _dofmap(scene: Scene, mesh: Any, fault_id: Any) -> Any:
+def _dofmap(scene: Scene, mesh: Any) -> Any:
     if not scene.fault_settings:
         return fields.build(mesh)
     lm_faces = (mesh.cell_fault_face >= 0).sum(axis=1)     # 3 multipliers per fault face, on its minus cell
@@ -201,7 +201,7 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     stage = PETSc.Log.Stage("Setup")
     stage.push()
     fault_id = topology.fault_id if topology is not None else None
-    dofmap = _dofmap(scene, mesh, fault_id)
+    dofmap = _dofmap(scene, mesh)
     solver_file = _apply_solver(scene, mesh, options_file)
     source = None
     try:
@@ -215,7 +215,7 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
             with logged("pfaultFaultSetup"):
                 fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
                 faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, scene.materials, fixed, lgmap)
-                bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, np.ones(faces.nf, bool), dofmap.cell_dofs, fixed,
+                bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, dofmap.cell_dofs, fixed,
                                       (assembler.grad, assembler.vol, assembler.lam, assembler.mu), faces.area,
                                       faces.R, lgmap.apply, PETSc.IntType)
                 faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact, bubbles)

@@ -137,7 +137,8 @@ class Condensed:
     def bubbles(self, ue: np.ndarray, dt: np.ndarray, fb: np.ndarray) -> np.ndarray:
         """Bubble dofs b (n, 3m) of cells with P1 dofs ue (n, 12), slot tractions' changes dt (n, m, 3) and loads
         fb (n, 3m)."""
-        rhs = fb - np.einsum("nai,na->ni", self.kub, ue) - np.einsum("nsji,nsj->nsi", self.c, dt).reshape(len(ue), 3 * self.slots)
+        ct_dt = np.einsum("nsji,nsj->nsi", self.c, dt).reshape(len(ue), 3 * self.slots)
+        rhs = fb - np.einsum("nai,na->ni", self.kub, ue) - ct_dt
         return np.einsum("nij,nj->ni", self.kbb_inv, rhs)
 
 
@@ -164,21 +165,21 @@ def body_bubble_load(vol: np.ndarray, b: np.ndarray, lface: np.ndarray) -> np.nd
 
 
 class CellBubbles:
-    """The bubbles of the cells on both sides of a rank's Lagrange fault faces, condensed: what they add to the
+    """The bubbles of the cells on both sides of a rank's fault faces, condensed: what they add to the
     cells' stiffness, to the faces' mean jumps, to the displacement rows and to the Jacobian, in the rank's local
     dof numbering (pure NumPy; the interface turns it into PETSc insertions).
 
     ``side_cell``, ``side_lface`` (nf, 2): the minus and plus cells of each owned face (local ids) and the face's
-    local face in each; ``enriched`` (nf,): the faces with bubbles (Lagrange faces); ``cell_dofs`` (nc, 12) local
+    local face in each; ``cell_dofs`` (nc, 12) local
     dofs; ``fixed`` a mask of the local dofs held by Dirichlet conditions (they take no force);
     ``cells`` (grad, vol, lam, mu) of all local cells; ``area``, ``R`` of the faces; ``to_global`` maps local dofs
     to global ones (taking integers of the type ``index_type``)."""
 
-    def __init__(self, side_cell: np.ndarray, side_lface: np.ndarray, enriched: np.ndarray, cell_dofs: np.ndarray,
+    def __init__(self, side_cell: np.ndarray, side_lface: np.ndarray, cell_dofs: np.ndarray,
                  fixed: np.ndarray, cells: tuple, area: np.ndarray, R: np.ndarray, to_global: Callable,
                  index_type: type = np.int64) -> None:
         grad, vol, lam, mu = cells
-        face = np.repeat(np.nonzero(enriched)[0], 2)
+        face = np.repeat(np.arange(len(side_cell)), 2)
         side = np.tile([0, 1], len(face) // 2)
         cell, lface = side_cell[face, side], side_lface[face, side]
         self.cell, inv = np.unique(cell, return_inverse=True)            # enriched cells (local ids)

@@ -27,7 +27,8 @@ class FieldSplit:
     couple; only each face's own 3x3 block is used.
 
     A scene without faults has no multiplier field (every fault face, Lagrange or penalty, carries its traction
-    as multipliers): the whole unknown is the displacement, and the PC becomes the displacement split's (its options, -fieldsplit_displacement_*)."""
+    as multipliers): the whole unknown is the displacement, and the PC becomes the displacement split's (its
+    options, -fieldsplit_displacement_*)."""
 
     def __init__(self, equations: Any, pc: Any) -> None:
         self.objects: list = []

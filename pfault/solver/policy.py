@@ -115,7 +115,7 @@ class FactorReuse:
                 self.null_pivots = mumps_null_pivots(ksp.getPC())
             self._factoring = None
             # Factors of a singular Jacobian (MUMPS fixes its null pivots: -mat_mumps_icntl_24 1) solve a
-            # consistent system in one iteration (a two-blocks test with a block held by nothing: 1 in each Newton iteration)
+            # consistent system in one iteration (two blocks, one held by nothing: 1 in each Newton iteration)
             # and an inconsistent one never: part of the body held by nothing but open faces ran FGMRES to
             # -ksp_max_it (10000 iterations) in every attempt of the step. Such factors are not kept and their
             # solves stop after SINGULAR_MAX_IT iterations; SNES then reports the failed linear solve
