@@ -4,5 +4,5 @@
 - ``contact``: the contact laws per face, pure NumPy (semismooth Lagrange rows, penalty);
 - ``bubbles``: the face bubbles of the fault faces' cells and their static condensation (NumPy kernels);
 - ``faces``: the faces on the distributed mesh, their cells and dofs on both sides;
-- ``interface``: the faces on the distributed mesh, their dofs, residual rows and Jacobian blocks.
+- ``interface``: the laws on the faces, their residual rows and Jacobian blocks, each face's history.
 """
