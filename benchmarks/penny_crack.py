@@ -2,7 +2,7 @@
 """Penny-shaped crack under remote tension (Sneddon): accuracy of the fault opening under refinement.
 
     .venv/bin/python benchmarks/penny_crack.py [--levels 4 6 8 10 12 16] [--ranks 1] [--L 8]
-                                               [--no-stabilisation-check] [--out runs/penny_crack]
+                                               [--out runs/penny_crack]
 
 For each level n (element size a/n at the crack, a/(3n) at its tip; tests/scripts/penny_mesh.py)
 makes the quarter-model mesh, runs config/penny_crack.opts on it (``python -m pfault``, under mpirun
@@ -10,8 +10,7 @@ for --ranks > 1) and prints one table row: tetrahedra, dofs, crack faces, the er
 face opening against w0, the error of the face nearest to the centre, the area-weighted RMS error
 over the crack divided by w0, the observed rates (h = a/n) against the previous level, the states
 (stick/slip/open) and the wall times (meshing; pfault run as measured here, and as pfault reports it).
-Then it runs the coarsest level once more without the traction-jump stabilisation and reports what
-happens. A JSON line with every figure ends the output.
+A JSON line with every figure ends the output.
 """
 import argparse
 import json
@@ -24,7 +23,7 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
-from penny_mesh import crack_errors, make_penny_mesh, read_fault_step  # noqa: E402
+from penny_mesh import crack_errors, make_penny_mesh  # noqa: E402
 from studies.run import read_summary, run_captured  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "penny_crack.opts")
@@ -43,7 +42,6 @@ def main(argv=None):
     p.add_argument("--a", type=float, default=1.0)
     p.add_argument("--L", type=float, default=8.0)
     p.add_argument("--out", default=os.path.join(REPO, "runs", "penny_crack"))
-    p.add_argument("--no-stabilisation-check", action="store_true")
     args = p.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
 
@@ -81,28 +79,6 @@ def main(argv=None):
               flush=True)
 
     result = {"a": args.a, "L": args.L, "ranks": args.ranks, "levels": rows}
-    if not args.no_stabilisation_check and rows:
-        n = rows[0]["n"]
-        out = os.path.join(args.out, f"n{n}_r{args.ranks}_nostab")
-        proc, summary, wall = run_pfault(os.path.join(args.out, f"penny{n}.msh"), out, args.ranks,
-                                         ["-pfault_fault_crack_stabilization", "false"])
-        check = {"n": n, "exit_code": proc.returncode, "run_s": round(wall, 2)}
-        if summary is not None:
-            step = summary["steps"][-1]
-            check.update({k: step.get(k) for k in ("converged", "reason", "newton_its", "factorizations", "stick",
-                                                   "slip", "open")})
-        if proc.returncode == 0:
-            w_ref = read_fault_step(os.path.join(args.out, f"n{n}_r{args.ranks}"))[2]["opening"]
-            w = read_fault_step(out)[2]["opening"]
-            check["opening_rel_diff"] = float(np.linalg.norm(w - w_ref) / np.linalg.norm(w_ref))
-            print(f"without stabilisation (n = {n}): converged; opening differs by "
-                  f"{check['opening_rel_diff']:.2e} (relative L2)")
-        else:
-            print(f"without stabilisation (n = {n}): exit code {proc.returncode}, converged "
-                  f"{check.get('converged')}, SNES reason {check.get('reason')} after {check.get('newton_its')} "
-                  f"Newton its, {check.get('factorizations')} factorisations (states stick/slip/open "
-                  f"{check.get('stick')}/{check.get('slip')}/{check.get('open')})")
-        result["without_stabilisation"] = check
     print(json.dumps(result))
 
 

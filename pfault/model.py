@@ -90,18 +90,6 @@ def _check_restart_dir(path: str) -> None:
         raise InputError(f"-pfault_restart {path}: no such run directory")
 
 
-def _check_iterative_faults(fault_settings: list) -> None:
-    """The Schur fieldsplit eliminates each face's multipliers through the 3x3 blocks the traction-jump
-    stabilisation gives a stuck face (every rank reads the same settings, so every rank raises)."""
-    if PETSc.Options().getString("pc_type", "") != "fieldsplit":
-        return
-    for f in fault_settings:
-        if f.method == "lagrange" and not f.stabilization:
-            raise InputError(f"-pfault_fault_{f.name}_stabilization false: the fieldsplit solver eliminates the "
-                             "multipliers through the stabilisation's face blocks; keep the stabilisation or "
-                             "use -pfault_solver mumps")
-
-
 def _check_one_pressure_source(heads: Any, drawdown: Any, flow: bool) -> None:
     """The pore pressure comes from one place: the groundwater model's heads exclude tables and the flow model."""
     if flow:
@@ -186,7 +174,7 @@ def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
         from .mesh.fault import split_faults
         split = split_faults(serial, fault_names)
         cell = properties.CellProperties.of_cells(scene.materials, serial.cell_material, serial_values)
-        topology = fault_topology(serial, split, cell.young_modulus, cell.poisson_ratio)
+        topology = fault_topology(serial, split, cell.young_modulus)
     written = 1 + s.time_steps // s.output_every + (s.time_steps % s.output_every > 0)
     checks.check_output_space(s.output_dir, checks.output_bytes(
         len(serial.points) + (len(split.split_vertices) if split else 0), len(serial.tets),
@@ -211,14 +199,10 @@ def _source(scene: Scene, mesh: Any, props: Any, field_values: dict | None) -> A
                                       substeps=fs.substeps, water_density=s.water_density, gravity=s.gravity))
 
 
-def _dofmap(scene: Scene, mesh: Any, fault_id: Any) -> Any:
+def _dofmap(scene: Scene, mesh: Any) -> Any:
     if not scene.fault_settings:
         return fields.build(mesh)
-    lm_faces = None
-    if any(f.method == "lagrange" for f in scene.fault_settings):
-        fid = mesh.cell_fault_face
-        is_lag = np.array([f.method == "lagrange" for f in scene.fault_settings])
-        lm_faces = ((fid >= 0) & is_lag[np.where(fid >= 0, fault_id[np.maximum(fid, 0)], 0)]).sum(axis=1)
+    lm_faces = (mesh.cell_fault_face >= 0).sum(axis=1)     # 3 multipliers per fault face, on its minus cell
     return fields.build(mesh, vert_sides=mesh.vert_sides, cell_side=mesh.cell_side, cell_multipliers=lm_faces)
 
 
@@ -262,7 +246,7 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     stage = PETSc.Log.Stage("Setup")
     stage.push()
     fault_id = topology.fault_id if topology is not None else None
-    dofmap = _dofmap(scene, mesh, fault_id)
+    dofmap = _dofmap(scene, mesh)
     solver_file = _apply_solver(scene, mesh, options_file)
     source = None
     try:
@@ -270,13 +254,17 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
         source = _source(scene, mesh, cell_props, serial_values)
         faults = None
         if scene.effects.faults:
+            from .faults.bubbles import CellBubbles
             from .faults.faces import FaultFaces
             from .faults.interface import FaultInterface
-            _check_iterative_faults(scene.fault_settings)
             with logged("pfaultFaultSetup"):
-                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, cell_props.young_modulus,
-                                   constrained_local(mesh, dofmap), mesh.dm.getLGMap())
-                faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact)
+                fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
+                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, cell_props.young_modulus, fixed,
+                                   lgmap)
+                bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, dofmap.cell_dofs, fixed,
+                                      (assembler.grad, assembler.vol, assembler.lam, assembler.mu), faces.area,
+                                      faces.R, lgmap.apply, PETSc.IntType)
+                faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact, bubbles)
         equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, faults,
                               scene.contact)
     except BaseException:

@@ -103,8 +103,6 @@ SPECS = [
     _s("pfault_fault_<fault>_friction_angle", "quantity", 30.0, "degree", "friction angle phi"),
     _s("pfault_fault_<fault>_method", "choice", "lagrange", "", "contact enforcement",
        choices=("lagrange", "penalty")),
-    _s("pfault_fault_<fault>_stabilization", "bool", True, "", "traction-jump stabilisation of the P1-P0 "
-       "multipliers (scaling from the local stiffness; no coefficient)"),
     _s("pfault_fault_<fault>_penalty_normal", "quantity", 0.0, "Pa/m", "normal penalty stiffness (0: E/h of "
        "the adjacent cell)"),
     _s("pfault_fault_<fault>_penalty_tangential", "quantity", 0.0, "Pa/m", "tangential penalty stiffness "

@@ -293,7 +293,6 @@ def read_faults(reader: OptionReader, surface_names: Collection[str]) -> list[Fa
             raise InputError(f"-{p}cohesion: must not be negative, got {c}")
         method = reader.get(p + "method")
         faults.append(FaultSettings(name=name, cohesion=c, friction_angle=phi, method=method,
-                                    stabilization=reader.get(p + "stabilization"),
                                     penalty_normal=reader.get(p + "penalty_normal") if method == "penalty" else 0.0,
                                     penalty_tangential=reader.get(p + "penalty_tangential")
                                     if method == "penalty" else 0.0))

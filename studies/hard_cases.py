@@ -268,27 +268,28 @@ def penalty_vs_lagrange(ref, softer):
                      evaluate, (ref, *softer))
 
 
-# Penalty faces at k -> infinity hold the faces' average jumps, as the multipliers do, but without the Lagrange
-# faces' traction-jump stabilisation (pfault.faults.stabilization, S at 1 % of the compliance estimate), which
-# moves the Lagrange answer by a share proportional to S. Fissure box, penalty at 1e4 E/h against Lagrange at S =
-# 1 %, 0.1 %, 0.01 % of the compliance: 2.4e-2, 2.7e-3, 3.0e-4 at h, 3.3e-2, 4.2e-3, 3.9e-4 at h/2.
+# Penalty faces at k -> infinity hold the faces' mean jumps (with the face bubbles' part), as the multipliers do:
+# their difference to the Lagrange faces is their own, 1/k (fissure box, benchmarks/penalty_lagrange.py: 2.3e-2,
+# 2.4e-4, 2.4e-6 at 100, 1e4, 1e6 E/h). With the former traction-jump stabilisation (S at 1 % of the compliance
+# estimate) the Lagrange answer moved by a share proportional to S, 2.4 % at h and 3.3 % at h/2: the bound below
+# was that share with a margin, and is kept as the bound beyond 100 E/h.
 STABILISATION_GAP = 0.05
 
 
 def penalty_gap(ref, tol=STABILISATION_GAP):
-    """Penalty against the Lagrange run ``ref`` once the penalty's own error is below the Lagrange faces'
-    stabilisation share: the difference of the final opening/slip fields at most ``tol``."""
+    """Penalty against the Lagrange run ``ref`` at a high stiffness: the difference of the final opening/slip
+    fields at most ``tol``."""
     def evaluate(res, runs):
         value = _rel(_jumps(res), _jumps(runs[ref]))
         return Verdict(value, value <= tol)
-    return Invariant(f"final opening/slip fields vs Lagrange `{ref}` (relative difference; the Lagrange faces' "
-                     "stabilisation alone leaves 2-3 %)", f"<= {tol:g}", evaluate, (ref,))
+    return Invariant(f"final opening/slip fields vs Lagrange `{ref}` (relative difference)", f"<= {tol:g}",
+                     evaluate, (ref,))
 
 
 def penalty_rate_in_k(ref, rungs, ratio, lo=0.9, hi=1.1, gap=STABILISATION_GAP):
     """Penalty error ~ 1/k: with runs at k / ratio^2, k / ratio (``rungs``) and k, the changes of the final
     opening/slip fields between successive runs shrink by ``ratio`` (order log(d1 / d2) / log(ratio) in
-    [lo, hi]); and the answer is within ``gap`` of the Lagrange run ``ref`` (its stabilisation's share)."""
+    [lo, hi]); and the answer is within ``gap`` of the Lagrange run ``ref``."""
     def evaluate(res, runs):
         a, b, c = _jumps(runs[rungs[0]]), _jumps(runs[rungs[1]]), _jumps(res)
         d1, d2 = float(np.linalg.norm(b - a)), float(np.linalg.norm(c - b))
@@ -657,8 +658,7 @@ brackets; *sub-steps* counts the steps that did not converge at once and were re
 *LU* counts MUMPS factorisations; *wall* is the end-to-end time of the mpirun (start-up and output included).
 The invariant is what shows the answer is right: an analytic value, a symmetry of the mesh and the scene,
 path independence under proportional loading, agreement between rank counts, or, for penalty faces, the answer
-closing on the Lagrange one as k grows until it is within the share the Lagrange faces' stabilisation moves
-theirs by (2-3 % here), and changing as 1/k beyond (order 1 in k). A row passes when it converged and its
+closing on the Lagrange one as k grows, as 1/k (order 1 in k). A row passes when it converged and its
 invariant holds. Every case runs with its scene's defaults and `-pfault_contact_monitor`; no solver option is
 given."""
 

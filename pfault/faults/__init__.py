@@ -2,6 +2,7 @@
 
 - ``settings``: what a scene asks of each fault (friction, method) and of the contact law;
 - ``contact``: the contact laws per face, pure NumPy (semismooth Lagrange rows, penalty);
-- ``stabilization``: the traction-jump stabilisation of the P1-P0 multipliers;
-- ``interface``: the faces on the distributed mesh, their dofs, residual rows and Jacobian blocks.
+- ``bubbles``: the face bubbles of the fault faces' cells and their static condensation (NumPy kernels);
+- ``faces``: the faces on the distributed mesh, their cells and dofs on both sides;
+- ``interface``: the laws on the faces, their residual rows and Jacobian blocks, each face's history.
 """

@@ -25,9 +25,10 @@ is read from the iterate inside every evaluation; r is continuous across stick/s
 drop the shear strength from c to 0 where the face opens: Newton then cycled a face between stuck and open
 (config/faulted_aquifer.opts at size factor 2: 200 Newton iterations and 8 sub-steps in its fifth year, not
 converged). The rows are forces (Pa m^2), like the displacement rows. The solution does not depend on
-c_N, c_T > 0 (stiffnesses, Pa/m, set per face by the interface from E/h and the stabilisation); they only
-decide which branch Newton takes. With the traction-jump stabilisation the jump g is the stabilised one,
-which depends on the face's own traction: c must keep t + c g increasing in t (see ``FaultInterface._laws``).
+c_N, c_T > 0 (stiffnesses, Pa/m, set per face by the interface from E/h); they only decide which branch Newton
+takes. On Lagrange faces g is the face-mean jump with the part of the face bubbles (pfault.faults.bubbles), which
+decreases with the face's own traction (d g / d t = -C K_bb^-1 C^T / A, negative definite): t + c g stays
+increasing in t.
 """
 
 from __future__ import annotations

@@ -1,32 +1,60 @@
-"""The fault faces this rank owns on the distributed mesh: their geometry, their dofs on both sides and their
-multipliers, and the exchange of per-face values between ranks.
+"""The fault faces this rank owns on the distributed mesh: their geometry, their cells and dofs on both sides and
+their multipliers, and the exchange of per-face values between ranks.
 
-Every fault face is handled by the rank that owns its minus cell; the face's vertices, with both sides'
-displacement dofs, are in that cell's closure, so the interface element is local. Only the stabilisation
-couples neighbouring faces, which may sit on other ranks: their values are gathered on every rank (the fault is
-a surface: O(faces) data). The laws that act on the faces are pfault.faults.interface's.
+Every fault face is handled by the rank that owns its minus cell, and the partition keeps its plus cell on the same
+rank (pfault.mesh.distributed): both cells, with their face bubbles (pfault.faults.bubbles), are local, so the
+interface element and its condensation are local. The laws that act on the faces are pfault.faults.interface's.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
-from ..mesh.serial import TET_FACES
+from ..errors import InputError
+from ..mesh.serial import TET_FACES, face_keys
 from ..physics import elasticity as el
 from . import contact as ct
 
 ADD = PETSc.InsertMode.ADD_VALUES
 
 
+@dataclass(frozen=True)
+class FaceSides:
+    """The two cells of each owned face (local ids, columns minus and plus) and the face's local face in each."""
+    cell: np.ndarray        # (nf, 2)
+    lface: np.ndarray       # (nf, 2)
+
+
+@dataclass(frozen=True)
+class FaceDofs:
+    """Displacement dofs of the face's vertices on both sides: local ``u`` (nf, 18, minus side first) and
+    global ``g_u``, whether each is free (``u_free``: constrained dofs take no force), the jump's sign of each
+    (plus - minus), and the multipliers' global dofs ``g_lm``."""
+    u: np.ndarray
+    g_u: np.ndarray
+    u_free: np.ndarray
+    sign: np.ndarray
+    g_lm: np.ndarray
+
+    @property
+    def minus(self) -> np.ndarray:
+        return self.u[:, :9].reshape(-1, 3, 3)
+
+    @property
+    def plus(self) -> np.ndarray:
+        return self.u[:, 9:].reshape(-1, 3, 3)
+
+
 class FaultFaces:
-    """The owned fault faces (serial ids ``face``, ordered; ``nf`` of ``nf_total``): minus cell and local face,
-    vertices, area, unit normal (minus -> plus) and local frames ``R``, the fault of each face and whether it is a
-    Lagrange face, the Young's modulus of the minus cell (from ``young``, per local cell), the displacement dofs of
-    both sides (local ``u_dofs``, global ``g_u``) and the multiplier dofs (``lm_dofs``, ``g_lm``; -1 on penalty
-    faces)."""
+    """The owned fault faces (serial ids ``face``, ordered; ``nf`` of ``nf_total``): minus cell ``cell``, both
+    cells ``sides``, vertices, area, unit normal (minus -> plus) and local frames ``R``, the fault of each face and
+    whether it is a Lagrange face, the Young's modulus of the minus cell (from ``young``, per local cell), the displacement dofs of both sides ``dofs`` and
+    the local multiplier dofs ``lm_dofs`` (every face carries its traction as 3 multipliers)."""
 
     def __init__(self, mesh: Any, dofmap: Any, settings: list, fault_id: np.ndarray, young: np.ndarray,
                  bc_local: np.ndarray, lgmap: Any) -> None:
@@ -37,56 +65,55 @@ class FaultFaces:
         fid = mesh.cell_fault_face[cells, lfaces]
         order = np.argsort(fid)
         self.face = fid[order]
-        self.cell, self.lface = cells[order], lfaces[order]
+        self.cell = cells[order]
         nf = self.nf = len(self.face)
         self.fault = fault_id[self.face]
-        self.verts = mesh.cells[self.cell[:, None], TET_FACES[self.lface]]
+        self.verts = mesh.cells[self.cell[:, None], TET_FACES[lfaces[order]]]
+        self.sides, together = _sides(mesh, self.cell, lfaces[order], self.verts)
+        if not self.mpi.allreduce(together, op=MPI.LAND):
+            raise InputError("a fault face's two cells are on different ranks; partition with PT-Scotch or "
+                             "ParMETIS (remove -petscpartitioner_type) or run on one rank")
         an = el.triangle_area_normal(mesh.coords[self.verts])   # outward normal of the minus cell: minus -> plus
         self.area = np.linalg.norm(an, axis=1)
         self.normal = an / np.maximum(self.area, 1e-300)[:, None]
         self.R = ct.local_frames(self.normal) if nf else np.zeros((0, 3, 3))
         self.lagrange = np.array([s.method == "lagrange" for s in settings])[self.fault]
-        self.has_lagrange = any(s.method == "lagrange" for s in settings)
-        self.h = np.sqrt(self.area)
         self.young = young[self.cell]
-        self._dofs(mesh, dofmap, bc_local, lgmap, fault_id)
-        self._setup_gather()
+        self.lm_dofs = self._multiplier_dofs(mesh, dofmap)
+        self.dofs = self._dofs(dofmap, bc_local, lgmap)
+        ids = np.concatenate(self.mpi.allgather(self.face)) if self.nf_total else np.zeros(0, np.int64)
+        self.all_ids = ids.astype(np.int64)          # serial ids of all ranks' faces, in allgather order
         self.pos = np.full(self.nf_total, -1)       # owned index of each serial face (-1: another rank's)
         self.pos[self.face] = np.arange(nf)
 
-    def _dofs(self, mesh, dofmap, bc_local, lgmap, fault_id):
+    @property
+    def h(self) -> np.ndarray:
+        """Size of each face (m): the square root of its area."""
+        return np.sqrt(self.area)
+
+    def _multiplier_dofs(self, mesh: Any, dofmap: Any) -> np.ndarray:
+        """Local multiplier dofs (nf, 3): the minus cell carries 3 dofs per fault face it is the minus cell of
+        (pfault.model), in local-face order."""
+        slot = np.zeros(self.nf, np.int64)
+        if self.nf:
+            at = mesh.cell_fault_face[self.cell] >= 0
+            slot = (at & (np.arange(4)[None, :] < self.sides.lface[:, :1])).sum(axis=1)
+        return dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None] + np.arange(3)
+
+    def _dofs(self, dofmap: Any, bc_local: np.ndarray, lgmap: Any) -> FaceDofs:
         nf = self.nf
-        self.n_local = dofmap.n_local
         cd = dofmap.cell_dofs.reshape(-1, 4, 3)
-        self.minus_dofs = cd[self.cell[:, None], TET_FACES[self.lface]]             # (nf,3,3)
-        self.plus_dofs = dofmap.vertex_dofs(1)[self.verts]                            # (nf,3,3)
-        # slot of each Lagrange face in its cell's multiplier block (the cell carries 3 dofs per Lagrange face
-        # it is the minus cell of, pfault.simulation): its Lagrange faces in local-face order
-        lag_fault = np.array([st.method == "lagrange" for st in self.settings])
-        slot = np.zeros(nf, np.int64)
-        if nf:
-            fid = mesh.cell_fault_face[self.cell]
-            lag_at = (fid >= 0) & lag_fault[fault_id[np.maximum(fid, 0)]]
-            slot = (lag_at & (np.arange(4)[None, :] < self.lface[:, None])).sum(axis=1)
-        self.lm_dofs = np.where(self.lagrange[:, None], dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None]
-                                + np.arange(3), -1)
-        self.u_dofs = np.concatenate([self.minus_dofs.reshape(nf, 9), self.plus_dofs.reshape(nf, 9)], axis=1)
-        self.sign = np.concatenate([-np.ones(9), np.ones(9)])                        # jump = plus - minus
+        minus = cd[self.cell[:, None], TET_FACES[self.sides.lface[:, 0]]]             # (nf,3,3)
+        plus = dofmap.vertex_dofs(1)[self.verts]                                         # (nf,3,3)
+        u = np.concatenate([minus.reshape(nf, 9), plus.reshape(nf, 9)], axis=1)
         idx = PETSc.IntType
-        self.g_u = lgmap.apply(self.u_dofs.ravel().astype(idx)).reshape(nf, 18) if nf else np.zeros((0, 18), idx)
-        self.g_lm = lgmap.apply(self.lm_dofs.ravel().astype(idx)).reshape(nf, 3) if nf else np.zeros((0, 3), idx)
-        self.u_mask = ~bc_local[self.u_dofs] if nf else np.zeros((0, 18), bool)       # constrained dofs get no force
+        g_u = lgmap.apply(u.ravel().astype(idx)).reshape(nf, 18) if nf else np.zeros((0, 18), idx)
+        g_lm = lgmap.apply(self.lm_dofs.ravel().astype(idx)).reshape(nf, 3) if nf else np.zeros((0, 3), idx)
+        free = ~bc_local[u] if nf else np.zeros((0, 18), bool)
+        return FaceDofs(u, g_u, free, np.concatenate([-np.ones(9), np.ones(9)]), g_lm)
 
     # -- data exchange ------------------------------------------------------------------------
-    def _setup_gather(self):
-        ids = np.concatenate(self.mpi.allgather(self.face)) if self.nf_total else np.zeros(0, np.int64)
-        self.all_ids = ids.astype(np.int64)
-        self.all_g_lm = np.zeros((self.nf_total, 3), np.int64)
-        glm = self.mpi.allgather(self.g_lm.astype(np.int64))
-        if self.nf_total:
-            self.all_g_lm[self.all_ids] = np.concatenate(glm)
-
-    def gather_faces(self, values):
+    def gather_faces(self, values: np.ndarray) -> np.ndarray:
         """Per-owned-face arrays (nf, k) -> (nf_total, k) in serial face order on every rank."""
         values = np.ascontiguousarray(values, dtype=np.float64)
         k = values.shape[1] if values.ndim > 1 else 1
@@ -97,19 +124,37 @@ class FaultFaces:
         return out
 
     # -- kinematics ----------------------------------------------------------------------------
-    def jumps(self, u_loc):
-        """Face-average jump, global (nf,3) and local (nf,3)."""
-        g = (u_loc[self.plus_dofs] - u_loc[self.minus_dofs]).mean(axis=1)
+    def jumps(self, u_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Face-average jump of the P1 displacements, global (nf,3) and local (nf,3)."""
+        g = (u_loc[self.dofs.plus] - u_loc[self.dofs.minus]).mean(axis=1)
         return g, np.einsum("nij,nj->ni", self.R, g)
 
-    def insert_pattern(self, J):
-        """Insert explicit zeros where the interface blocks go (for exact preallocation)."""
-        lag = np.nonzero(self.lagrange)[0]
-        n = len(lag)
+    def insert_pattern(self, J: Any) -> None:
+        """Insert explicit zeros where the interface blocks within the faces' vertices go (for exact
+        preallocation; the bubbles' blocks beyond them are pfault.faults.interface's pattern)."""
+        n, d = self.nf, self.dofs
         if n:
-            J.setValuesRCV(self.g_u[lag], self.g_lm[lag], np.zeros((n, 54)), addv=ADD)
-            J.setValuesRCV(self.g_lm[lag], self.g_u[lag], np.zeros((n, 54)), addv=ADD)
-            J.setValuesRCV(self.g_lm[lag], self.g_lm[lag], np.zeros((n, 9)), addv=ADD)
-        pen = np.nonzero(~self.lagrange)[0]
-        if len(pen):   # both sides' dofs of a penalty face
-            J.setValuesRCV(self.g_u[pen], self.g_u[pen], np.zeros((len(pen), 324)), addv=ADD)
+            J.setValuesRCV(d.g_u, d.g_lm, np.zeros((n, 54)), addv=ADD)
+            J.setValuesRCV(d.g_lm, d.g_u, np.zeros((n, 54)), addv=ADD)
+            J.setValuesRCV(d.g_lm, d.g_lm, np.zeros((n, 9)), addv=ADD)
+
+
+def _sides(mesh: Any, cell: np.ndarray, lface: np.ndarray, verts: np.ndarray) -> tuple[FaceSides, bool]:
+    """The minus and plus cells of the faces (minus cells ``cell`` with local faces ``lface``, vertices ``verts``):
+    the plus cell is the other local cell with the face's three vertices (a split vertex is one mesh point for
+    both sides); False where a plus cell is not on this rank."""
+    nf = len(cell)
+    z = np.zeros((0, 2), np.int64)
+    if nf == 0:
+        return FaceSides(z, z), True
+    nv = len(mesh.coords)
+    keys = face_keys(mesh.cells[:, TET_FACES].reshape(-1, 3), nv)
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
+    want = face_keys(verts, nv)
+    lo, hi = np.searchsorted(ks, want, "left"), np.searchsorted(ks, want, "right")
+    if np.any(hi - lo != 2):
+        return FaceSides(z, z), False       # a plus cell on another rank
+    a, b = order[lo], order[lo + 1]
+    other = np.where(a // 4 == cell, b, a)
+    return FaceSides(np.column_stack([cell, other // 4]), np.column_stack([lface, other % 4])), True

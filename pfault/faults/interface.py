@@ -1,16 +1,18 @@
 """Fault interface: the contact laws on the fault faces (pfault.faults.faces), their residual rows and Jacobian
 blocks, and each face's history.
 
-The stick/slip/open state of a face is not stored: the semismooth law (``contact.lagrange_rows``) reads it from
-the iterate in every evaluation. What a step remembers is its start (``StepStart``: the law's jumps and the
-tractions of the last converged state), which the slip increment is measured from. The stabilisation acts on
-the tractions' change since the initial state (``t0``), so a closed or stuck face's jump does not depend on
-how the loading was cut into steps.
+A Lagrange face's law acts on its face-mean jump with the part of the face bubbles of its two cells
+(pfault.faults.bubbles, condensed cell by cell): the P0 tractions are then stable without a stabilisation
+term, and a stuck face's mean jump is held at zero. The stick/slip/open state of a face is not stored: the
+semismooth law (``contact.lagrange_rows``) reads it from the iterate in every evaluation. What a step remembers
+is its start (``StepStart``: the law's jumps and the tractions of the last converged state), which the slip
+increment is measured from.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from mpi4py import MPI
@@ -18,7 +20,8 @@ from petsc4py import PETSc
 
 from ..effects import logged
 from . import contact as ct
-from .stabilization import stabilization_pattern, stabilization_rows
+from .bubbles import CellBubbles
+from .faces import FaultFaces
 
 ADD = PETSc.InsertMode.ADD_VALUES
 
@@ -26,293 +29,264 @@ ADD = PETSc.InsertMode.ADD_VALUES
 @dataclass(frozen=True)
 class FaultTopology:
     """Serial (partition-independent) data of all fault faces, built on rank 0 and shared: the fault each face
-    belongs to, the stabilisation pairs and matrices, and the stiffness modulus of the face (harmonic mean of
-    the Young's moduli of its two cells: the softer side governs the interface)."""
+    belongs to and the stiffness modulus of the face (harmonic mean of the Young's moduli of its two cells: the
+    softer side governs the interface)."""
     fault_id: np.ndarray
-    pairs: np.ndarray
-    pair_S: np.ndarray
     young: np.ndarray
 
 
-def fault_topology(serial, split, young, nu):
-    """FaultTopology of the split faces of the serial mesh (rank 0); ``young``, ``nu``: per serial cell."""
-    from .stabilization import stabilization_pairs
-    pairs, S = stabilization_pairs(serial, split, young, nu)
+def fault_topology(serial: Any, split: Any, young: np.ndarray) -> FaultTopology:
+    """FaultTopology of the split faces of the serial mesh (rank 0); ``young``: per serial cell."""
     e_minus, e_plus = young[split.minus_cell], young[split.plus_cell]
-    return FaultTopology(split.fault_id, pairs, S, 2.0 * e_minus * e_plus / (e_minus + e_plus))
+    return FaultTopology(split.fault_id, 2.0 * e_minus * e_plus / (e_minus + e_plus))
 
 
 @dataclass(frozen=True)
 class StepStart:
-    """The converged state a step starts from, for the owned faces: the jumps the laws act on (local frame;
-    the stabilised jump on Lagrange faces), the tractions and the states."""
+    """The converged state a step starts from, for the owned faces: the jumps the laws act on (local frame),
+    the tractions and the states."""
     g: np.ndarray
     t: np.ndarray
     state: np.ndarray
 
-    def trial(self):
+    def trial(self) -> np.ndarray:
         """States of the step's elastic trial: closed faces stuck, open faces open."""
         return np.where(self.state == ct.OPEN, ct.OPEN, ct.STICK)
 
 
 class FaultInterface:
-    """The contact laws of all faults on the faces this rank owns (``faces``, a pfault.faults.faces.FaultFaces):
-    their residual rows and Jacobian blocks, and each face's history (initial traction ``t0``, the pore pressure
-    its law sees ``pn``, the start of the step ``start``)."""
+    """The contact laws of all faults on the faces this rank owns (``faces``): their residual rows and Jacobian
+    blocks, and each face's history (initial traction ``t0``, the pore pressure its law sees ``pn``, the start
+    of the step ``start``). ``bubbles``: the condensed face bubbles of the faces' cells.
 
-    def __init__(self, faces, settings, topology, contact):
-        self.faces, self.settings, self.contact = faces, settings, contact
-        fault_id, pairs, pair_S = topology.fault_id, topology.pairs, topology.pair_S
+    Every face carries its traction as 3 multipliers, and its rows are the semismooth contact law's; a penalty face's
+    law takes its jump less the penalty's compliance (a perturbed Lagrangian, ``_law_jumps``), so both laws act on the
+    same jump, with its bubble part, and penalty faces tend to Lagrange faces as their stiffness grows."""
+
+    def __init__(self, faces: FaultFaces, settings: list, topology: FaultTopology, contact: Any,
+                 bubbles: CellBubbles) -> None:
+        self.faces, self.settings, self.contact, self.bubbles = faces, settings, contact, bubbles
         nf = faces.nf
         self.t0 = np.zeros((nf, 3))         # initial (prestress) traction, local; loads nothing
         self.pn = np.zeros(nf)              # alpha p at the face: effective traction = t + (pn, 0, 0)
-        stab = np.array([s.stabilization and s.method == "lagrange" for s in settings])
-        keep = stab[fault_id[pairs[:, 0]]] if len(pairs) else np.zeros(0, bool)
-        self.pairs, self.pair_S = pairs[keep], pair_S[keep]
         self.law, self.penalty_law = self._laws(topology.young[faces.face])
-        self.t_ref_all = np.zeros((faces.nf_total, 3))     # t0 of all faces (serial order), set by begin_step
         self.start = StepStart(np.zeros((nf, 3)), np.zeros((nf, 3)), np.full(nf, ct.STICK))
 
-    def _laws(self, face_young):
-        """Per-face law parameters: the Lagrange law's augmentation, and the penalty stiffness (E/h of the minus
-        cell unless given).
-
-        The augmentation is E/h with E the harmonic mean of the two sides' moduli, capped where the
-        stabilisation needs it: the law's argument t + c g_stab, with g_stab = g + S_f (dt_nb - dt) / A,
-        decreases with the face's own traction once c S_f / A > 1, and a state can then have no solution
-        (with S at its full compliance estimate Wuxi had c S_f / A = 3 to 6 at E/h, and Newton cycled between
-        open and closed at the opening front or flipped a slip direction every iteration). The cap
-        c <= A / (2 lambda_max(S_f)) keeps it increasing; with S at 1 % of the estimate it is inactive on the
-        paper-size meshes (c lambda_max(S_f) / A: median 0.05 on Wuxi, 0.19 on Queretaro). The solution does
-        not depend on c."""
-        coh = np.array([s.cohesion for s in self.settings])[self.faces.fault]
-        tphi = np.tan(np.radians([s.friction_angle for s in self.settings]))[self.faces.fault]
-        h = np.maximum(self.faces.h, 1e-300)
+    def _laws(self, face_young: np.ndarray) -> tuple[ct.FaceLaw, ct.FaceLaw]:
+        """Per-face law parameters: the Lagrange law's augmentation E/h (E the harmonic mean of the two sides'
+        moduli; the solution does not depend on it), and the penalty stiffness (E/h of the minus cell unless
+        given)."""
+        fc = self.faces
+        coh = np.array([s.cohesion for s in self.settings])[fc.fault]
+        tphi = np.tan(np.radians([s.friction_angle for s in self.settings]))[fc.fault]
+        h = np.maximum(fc.h, 1e-300)
         c = face_young / h
-        if len(self.pairs):
-            # S_f: the sum of the face's stabilisation matrices
-            S_f = np.zeros((self.faces.nf_total, 3, 3))
-            np.add.at(S_f, self.pairs[:, 0], self.pair_S)
-            np.add.at(S_f, self.pairs[:, 1], self.pair_S)
-            lam = np.linalg.eigvalsh(S_f[self.faces.face])[:, -1] / np.maximum(self.faces.area, 1e-300)
-            c = np.where(lam > 0, np.minimum(c, 0.5 / np.maximum(lam, 1e-300)), c)
-        law = ct.FaceLaw(self.faces.area, coh, tphi, c, c)
-        k = self.faces.young / h
-        kn = np.array([s.penalty_normal for s in self.settings])[self.faces.fault]
-        kt = np.array([s.penalty_tangential for s in self.settings])[self.faces.fault]
-        return law, ct.FaceLaw(self.faces.area, coh, tphi, np.where(kn > 0, kn, k), np.where(kt > 0, kt, k))
+        k = fc.young / h
+        kn = np.array([s.penalty_normal for s in self.settings])[fc.fault]
+        kt = np.array([s.penalty_tangential for s in self.settings])[fc.fault]
+        return (ct.FaceLaw(fc.area, coh, tphi, c, c),
+                ct.FaceLaw(fc.area, coh, tphi, np.where(kn > 0, kn, k), np.where(kt > 0, kt, k)))
 
-    def effective(self, t):
+    def effective(self, t: np.ndarray) -> np.ndarray:
         """Effective tractions (Terzaghi): the multiplier is the total traction; friction and opening act on
         t_N + alpha p."""
         te = np.array(t, dtype=float, copy=True)
         te[:, 0] += self.pn
         return te
 
-    def _penalty(self, gl, state=None):
-        """Penalty faces' total traction, its derivative and state (zero rows for Lagrange faces). ``state``:
-        the branches to take instead of the return map's (stick or open)."""
+    def tractions(self, x_loc: np.ndarray) -> np.ndarray:
+        """Total traction of every owned face (local frame): its multipliers."""
+        return x_loc[self.faces.lm_dofs]
+
+    def law_jumps(self, x_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The face-mean jumps (P1 part and bubble part), global and local (nf, 3), of the state x_loc; and the
+        total tractions."""
+        t = self.tractions(x_loc)
+        return (*self._mean_jumps(x_loc, t - self.t0), t)
+
+    def _mean_jumps(self, x_loc: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        gl = self.faces.jumps(x_loc)[1]
+        gl = gl + self.bubbles.jump(x_loc, dt) / np.maximum(self.faces.area, 1e-300)[:, None]
+        return np.einsum("nji,nj->ni", self.faces.R, gl), gl
+
+    def relative_jumps(self, x_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The face-mean jumps, global and local, of a state relative to the initial one (x_rel: displacements and
+        tractions less those of the initial state, which loads nothing), under the loads last set: what is
+        reported as opening and slip. The initial state's own: within ``bubbles.unloaded()``."""
+        return self._mean_jumps(x_rel, self.tractions(x_rel))
+
+    def _law_jumps(self, x_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The jumps the laws take (local frame) and the total tractions. A penalty face's is its jump less the
+        penalty's compliance, g - (t_eff - t0_eff) / k with t0_eff the initial normal traction (tangential: t_T / k,
+        measured from the step's start like g_T): its Lagrange rows then hold t_N = t0_N + k g_N while closed and
+        t_T = t_T^n + k dg_T while stuck, and slip along the return map's trial t_T^n + k dg_T, the penalty law."""
+        _, gl, t = self.law_jumps(x_loc)
         pen = ~self.faces.lagrange
-        t = np.zeros((self.faces.nf, 3))
-        d = np.zeros((self.faces.nf, 3, 3))
-        st = np.full(self.faces.nf, ct.STICK)
         if np.any(pen):
-            # the penalty law acts on the effective traction; the faces receive the total one
-            t[pen], d[pen], st[pen] = ct.penalty_traction(self.penalty_law[pen], gl[pen], self.start.g[pen],
-                                                          self.effective(self.start.t)[pen],
-                                                          self.t0[pen, 0] + self.pn[pen],
-                                                          None if state is None else state[pen])
-            t[pen, 0] -= self.pn[pen]
-        return t, d, st
+            law = self.penalty_law[pen]
+            te = self.effective(t[pen])
+            te[:, 0] -= self.t0[pen, 0] + self.pn[pen]
+            gl[pen] -= te / np.stack([law.c_n, law.c_t, law.c_t], axis=1)
+        return gl, t
 
-    def tractions(self, x_loc, gl=None, state=None):
-        """Total traction of every owned face (local frame): the multiplier, or the penalty law's (in the
-        branches ``state`` if given)."""
-        if gl is None:
-            gl = self.faces.jumps(x_loc)[1]
-        t, _, _ = self._penalty(gl, state)
-        lag = self.faces.lagrange
-        if self.faces.has_lagrange:
-            t[lag] = x_loc[self.faces.lm_dofs[lag]]
-        return t
-
-    def set_pore_pressure(self, alpha_p):
+    def set_pore_pressure(self, alpha_p: np.ndarray) -> None:
         """alpha p (Pa, compression positive) at each owned face for the contact laws."""
         self.pn = np.asarray(alpha_p, dtype=float).copy()
 
-    def begin_step(self, x_loc):
+    def begin_step(self, x_loc: np.ndarray) -> None:
         """Record the converged state ``x_loc`` (under the pore pressure it was solved for) as the start of the
         next step."""
-        if len(self.pairs):
-            self.t_ref_all = self.faces.gather_faces(self.t0)
-        gl = self.faces.jumps(x_loc)[1]
-        t = self.tractions(x_loc, gl)
-        g = np.where(self.faces.lagrange[:, None], self._stabilised(x_loc, gl, t)[0], gl)
+        g, t = self._law_jumps(x_loc)
         self.start = StepStart(g, t, self.start.state)     # the states are measured from this start
         self.start = StepStart(g, t, self.states(x_loc, exact=True))
 
-    def start_from(self, x_loc, t):
-        """Start the faces' laws at the state x_loc from the total tractions ``t`` (owned faces, local frame):
-        the initial traction t0 of a geostatic state, or the tractions a checkpoint recorded. A penalty face's
-        tangential traction is its history's return map, not a function of its jump; Lagrange faces read
-        theirs from their multipliers. Then ``begin_step`` at x_loc (which reads the penalty faces' start only)."""
-        self.start = StepStart(self.faces.jumps(x_loc)[1], np.array(t, dtype=float), self.start.state)
+    def start_from(self, x_loc: np.ndarray, t: np.ndarray) -> None:
+        """Start the faces' laws at the state x_loc from the total tractions ``t`` (owned faces, local frame; the
+        multipliers of x_loc): the initial traction t0 of a geostatic state, or the tractions a checkpoint
+        recorded."""
+        self.start = StepStart(self._law_jumps(x_loc)[0], np.array(t, dtype=float), self.start.state)
         self.begin_step(x_loc)
 
-    def initial_tractions(self, sigma0):
+    def initial_tractions(self, sigma0: np.ndarray) -> np.ndarray:
         """Multipliers of the initial state: the prestress of the minus cell projected on the face (local frame;
         the prestress is continuous across a fault in a layered initial state)."""
         tg = np.einsum("nij,nj->ni", sigma0[self.faces.cell], self.faces.normal)
         return np.einsum("nij,nj->ni", self.faces.R, tg)
 
     # -- states ---------------------------------------------------------------------------------
-    def states(self, x_loc, exact=False):
+    def states(self, x_loc: np.ndarray, exact: bool = False) -> np.ndarray:
         """Stick/slip/open of every owned face at the iterate x_loc. ``exact``: the branches the residual takes;
         otherwise as reported: a face within round-off (1e-9 E) of a switch counts as closed and stuck."""
-        gl = self.faces.jumps(x_loc)[1]
-        t = self.tractions(x_loc, gl)
-        st = self._penalty(gl)[2]
-        gs = self._stabilised(x_loc, gl, t)[0] if self.faces.has_lagrange else gl
-        lag = self.faces.lagrange
-        if np.any(lag):
-            tol = 0.0 if exact else 1e-9 * self.faces.young[lag]
-            st[lag] = ct.states(self.law[lag], gs[lag], self.start.g[lag], self.effective(t)[lag], tol)
-        return st
+        return self._law_terms(x_loc, tol=0.0 if exact else 1e-9)[0]
 
-    def counts_by_state(self, x_loc):
+    def counts_by_state(self, x_loc: np.ndarray) -> dict:
         st = self.states(x_loc)
         c = self.faces.mpi.allreduce(np.bincount(st, minlength=3), op=MPI.SUM)
         return {name: int(c[i]) for i, name in enumerate(ct.STATE_NAMES)}
 
     # -- residual and Jacobian ------------------------------------------------------------------
-    def _stabilised(self, x_loc, gl, t):
-        """Stabilised local jumps of the owned faces (g + S (dt_b - dt_a) / A, dt = t - t0: the change since the
-        initial state) and the stabilisation blocks [(owned index, rows, cols, d(A g_stab)/dt)]; ``t``: total
-        tractions of the owned faces.
+    def _law_terms(self, x_loc: np.ndarray, state: np.ndarray | None = None, tol: float = 0.0) -> tuple:
+        """Every owned face's (state, rows r, dr/dg, dr/dt) (forces, local frame; g the face-mean jump with its
+        bubble part): the semismooth Lagrange rows on the jumps of ``_law_jumps``, whose penalty faces' part in t
+        adds to dr/dt. ``state``: the branches to take instead of the iterate's; ``tol``: relative to E, the
+        states' reporting tolerance (``states``)."""
+        fc = self.faces
+        gl, t = self._law_jumps(x_loc)
+        if tol > 0:
+            st = ct.states(self.law, gl, self.start.g, self.effective(t), tol * fc.young)
+            return st, None, None, None
+        st, r, dg, dt = ct.lagrange_rows(self.law, gl, self.start.g, self.effective(t), state)
+        pen = ~fc.lagrange
+        if np.any(pen):
+            law = self.penalty_law[pen]
+            dt[pen] -= dg[pen] / np.stack([law.c_n, law.c_t, law.c_t], axis=1)[:, None, :]
+        return st, r, dg, dt
 
-        Measured from the initial state, not from the step's start: a closed face's law then holds its
-        stabilised jump at zero, g_N = -S (dt_b - dt_a)_N / A, whatever steps the loading took. Measured from
-        the step's start, a proportional loading in 1 and in 40 steps ended 0.76 apart (relative difference of
-        the fissure box's opening and slip fields, config/hard/fissure_box.opts), 15 faces in another state."""
-        if not len(self.pairs):
-            return gl, []
-        dt_all = self.faces.gather_faces(t) - self.t_ref_all
-        rs, blocks = stabilization_rows(self.pairs, self.pair_S, self.faces.pos, dt_all, self.faces.all_g_lm)
-        return gl + rs / np.maximum(self.faces.area, 1e-300)[:, None], blocks
-
-    def _lagrange_terms(self, x_loc, state=None):
-        """Owned Lagrange faces: (indices, states, rows, dr/dg, dr/dt, stabilisation blocks). The law takes the
-        stabilised jump; its derivative reaches the neighbours' multipliers through the stabilisation blocks.
-        ``state`` (owned faces): the branches to take instead of the iterate's (stick or open)."""
-        gl = self.faces.jumps(x_loc)[1]
-        t = self.tractions(x_loc, gl)
-        gs, sblocks = self._stabilised(x_loc, gl, t)
-        idx = np.nonzero(self.faces.lagrange)[0]
-        st, r, dg, dt = ct.lagrange_rows(self.law[idx], gs[idx], self.start.g[idx], self.effective(t)[idx],
-                                         None if state is None else state[idx])
-        # d r / d t_b = (d r / d g_stab) S_ab / A of the row face (dg is dr/dg_stab)
-        drdgs = np.zeros((self.faces.nf, 3, 3))
-        drdgs[idx] = dg / np.maximum(self.faces.area[idx], 1e-300)[:, None, None]
-        blocks = []
-        for own, rows, cols, vals in sblocks:
-            keep = self.faces.lagrange[own]
-            if np.any(keep):
-                blocks.append((rows[keep], cols[keep], np.einsum("nij,njk->nik", drdgs[own[keep]], vals[keep])))
-        return idx, st, r, dg, dt, blocks
-
-    def residual(self, x_loc, out, state=None):
+    def residual(self, x_loc: np.ndarray, out: np.ndarray, state: np.ndarray | None = None) -> np.ndarray:
         """Add the interface terms to the local residual array ``out``; returns the owned faces' states.
         ``state``: the faces' branches to take instead of the iterate's (stick or open)."""
         with logged("pfaultFaultResidual"):
-            return self._residual(x_loc, out, state)
+            fc = self.faces
+            dt = self.tractions(x_loc) - self.t0
+            # forces on the displacement dofs from the traction change (the initial traction is in equilibrium
+            # with the initial stress): minus side -(A/3) R^T dt, plus side +(A/3) R^T dt; and through the bubbles
+            force = np.einsum("nji,nj->ni", fc.R, dt) * (fc.area / 3.0)[:, None]
+            fu = fc.dofs.sign[None, :] * np.tile(force, (1, 6)) * fc.dofs.u_free
+            out += np.bincount(fc.dofs.u.ravel(), weights=fu.ravel(), minlength=len(out))
+            self.bubbles.forces(dt, out)
+            st, r, _, _ = self._law_terms(x_loc, state)
+            out += np.bincount(fc.lm_dofs.ravel(), weights=r.ravel(), minlength=len(out))
+            return st
 
-    def _residual(self, x_loc, out, state):
-        gl = self.faces.jumps(x_loc)[1]
-        t = self.tractions(x_loc, gl, state)
-        # forces on the displacement dofs from the traction change (the initial traction is in equilibrium
-        # with the initial stress): minus side -(A/3) R^T dt, plus side +(A/3) R^T dt
-        force = np.einsum("nji,nj->ni", self.faces.R, t - self.t0) * (self.faces.area / 3.0)[:, None]
-        fu = self.faces.sign[None, :] * np.tile(force, (1, 6)) * self.faces.u_mask
-        out += np.bincount(self.faces.u_dofs.ravel(), weights=fu.ravel(), minlength=len(out))
-        out_state = self._penalty(gl, state)[2]
-        if self.faces.has_lagrange:
-            idx, st, r, _, _, _ = self._lagrange_terms(x_loc, state)
-            out_state[idx] = st
-            out += np.bincount(self.faces.lm_dofs[idx].ravel(), weights=r.ravel(), minlength=len(out))
-        return out_state
-
-    def add_jacobian(self, x_loc, J, state=None, glued=False):
+    def add_jacobian(self, x_loc: np.ndarray, J: Any, state: np.ndarray | None = None, glued: bool = False
+                     ) -> np.ndarray:
         """Add the interface blocks to J (global indices); returns the owned faces' states. ``state``: the
         faces' branches to take instead of the iterate's (stick or open); ``glued``: every face stuck whatever
-        x_loc (the penalty and Lagrange laws' stick branches)."""
+        x_loc (the laws' stick branches)."""
         with logged("pfaultFaultJacobian"):
-            return self._add_jacobian(x_loc, J, state, glued)
+            if glued:
+                state = np.full(self.faces.nf, ct.STICK)
+            st, _, dg, dt = self._law_terms(x_loc, state)
+            self._add_blocks(J, dg, dt)
+            return st
 
-    def _add_jacobian(self, x_loc, J, state, glued):
-        gl = self.faces.jumps(x_loc)[1]
-        _, d, out_state = self._penalty(gl, state)
-        if glued:
-            law = self.penalty_law
-            d = np.stack([law.c_n, law.c_t, law.c_t], axis=1)[:, :, None] * np.eye(3)[None]
-            state = np.full(self.faces.nf, ct.STICK)
-        if self.faces.has_lagrange:
-            idx, st, _, dg, dt, blocks = self._lagrange_terms(x_loc, state)
-            out_state[idx] = st
-            self._add_lagrange_blocks(J, idx, dg, dt)
-            for rows, cols, vals in blocks:
-                J.setValuesRCV(rows.astype(PETSc.IntType), cols.astype(PETSc.IntType), vals.reshape(-1, 9), addv=ADD)
-        pen = np.nonzero(~self.faces.lagrange)[0]
-        if len(pen):
-            self._add_penalty_blocks(J, pen, d[pen])
-        return out_state
+    def add_stiffness(self, K: Any, blocked: bool) -> None:
+        """Add what the condensed bubbles add to their cells' stiffness, -K_ub K_bb^-1 K_bu, to K (local numbering;
+        ``blocked``: as 3x3 blocks, as pfault.assembly.elastic's ``add_stiffness``)."""
+        dofs, ke = self.bubbles.stiffness()
+        if len(dofs) == 0:
+            return
+        if blocked:
+            idx = (dofs[:, 0::3] // 3).astype(PETSc.IntType)
+            K.setValuesBlockedLocalRCV(idx, idx, ke.reshape(len(ke), 144), addv=ADD)
+        else:
+            idx = dofs.astype(PETSc.IntType)
+            K.setValuesLocalRCV(idx, idx, ke.reshape(len(ke), 144), addv=ADD)
 
-    def add_glued(self, J):
+    def set_bubble_load(self, fb: np.ndarray, out: np.ndarray) -> None:
+        """Take fb as the bubbles' load (pfault.faults.bubbles.CellBubbles.set_load) and add its condensed
+        displacement load to the local array ``out``."""
+        self.bubbles.set_load(fb, out)
+
+    def add_glued(self, J: Any, n_local: int) -> None:
         """Add the interface blocks of glued faults (every face stuck, no jump) to J: the linear operator of
-        the gravity state a geostatic scene starts from."""
-        self.add_jacobian(np.zeros(self.faces.n_local), J, glued=True)
+        the gravity state a geostatic scene starts from (``n_local``: the local dofs' number)."""
+        self.add_jacobian(np.zeros(n_local), J, glued=True)
 
-    def _add_lagrange_blocks(self, J, idx, dg, dt):
-        """Blocks of Lagrange faces ``idx``: forces on the displacement rows, d force/d t = sign A/3 R^T, and the
-        constraint rows' dr/du = dr/dg_loc R (1/3) sign and dr/dt."""
-        n = len(idx)
+    def glued_load(self, out: np.ndarray) -> None:
+        """Add to the multiplier rows of the local array ``out`` the right-hand side of the glued faces' rows
+        for the bubbles' load last set (their stick rows -c A g, with the load's part of A g)."""
+        law = self.law
+        out[self.faces.lm_dofs] += np.stack([law.c_n, law.c_t, law.c_t], axis=1) * self.bubbles.jump_of_load()
+
+    def _add_blocks(self, J: Any, dg: np.ndarray, dt: np.ndarray) -> None:
+        """The faces' blocks: forces on the displacement rows, d force/d t = sign A/3 R^T, and the rows'
+        dr/du = dr/dg_loc R (1/3) sign and dr/dt; then those through the bubbles."""
+        fc, d = self.faces, self.faces.dofs
+        n = fc.nf
         if n == 0:
             return      # (petsc4py's setValuesRCV divides by the number of rows)
-        fc = self.faces
-        sign = fc.sign.reshape(6, 3)[:, 0]
-        blk = (sign[None, :, None, None] * (fc.area[idx] / 3.0)[:, None, None, None]
-               * np.transpose(fc.R[idx], (0, 2, 1))[:, None, :, :]).reshape(n, 18, 3)
-        J.setValuesRCV(fc.g_u[idx], fc.g_lm[idx], (blk * fc.u_mask[idx][:, :, None]).reshape(n, 54), addv=ADD)
-        drdg = np.einsum("nij,njk->nik", dg, fc.R[idx]) / 3.0
-        blk = (sign[None, None, :, None] * drdg[:, :, None, :]).reshape(n, 3, 18) * fc.u_mask[idx][:, None, :]
-        J.setValuesRCV(fc.g_lm[idx], fc.g_u[idx], blk.reshape(n, 54), addv=ADD)
-        J.setValuesRCV(fc.g_lm[idx], fc.g_lm[idx], dt.reshape(n, 9), addv=ADD)
+        sign = d.sign.reshape(6, 3)[:, 0]
+        blk = (sign[None, :, None, None] * (fc.area / 3.0)[:, None, None, None]
+               * np.transpose(fc.R, (0, 2, 1))[:, None, :, :]).reshape(n, 18, 3)
+        J.setValuesRCV(d.g_u, d.g_lm, (blk * d.u_free[:, :, None]).reshape(n, 54), addv=ADD)
+        drdg = np.einsum("nij,njk->nik", dg, fc.R) / 3.0
+        blk = (sign[None, None, :, None] * drdg[:, :, None, :]).reshape(n, 3, 18) * d.u_free[:, None, :]
+        J.setValuesRCV(d.g_lm, d.g_u, blk.reshape(n, 54), addv=ADD)
+        J.setValuesRCV(d.g_lm, d.g_lm, dt.reshape(n, 9), addv=ADD)
+        per_area = dg / np.maximum(fc.area, 1e-300)[:, None, None]       # d r / d(A g)
+        for kind, rows, cols, vals in self.bubbles.jacobian_blocks(per_area):
+            if len(rows) == 0:
+                continue
+            if kind == "fu":
+                rows, cols = d.g_lm[rows], self.bubbles.g_dofs(cols)
+            elif kind == "ff":
+                rows, cols = d.g_lm[rows], d.g_lm[cols]
+            else:
+                rows, cols = self.bubbles.g_dofs(rows), d.g_lm[cols]
+            J.setValuesRCV(rows.astype(PETSc.IntType), cols.astype(PETSc.IntType), vals.reshape(len(vals), -1),
+                           addv=ADD)
 
-    def _add_penalty_blocks(self, J, pen, d):
-        """Blocks of penalty faces ``pen`` with traction derivative d = dt/dg_loc (n,3,3):
-        force = A/3 R^T t(g_loc), g_loc = R (1/3) sum sign u."""
-        fc = self.faces
-        sign = fc.sign.reshape(6, 3)[:, 0]
-        dfdg = np.einsum("nji,njk,nkl->nil", fc.R[pen], d, fc.R[pen]) * (fc.area[pen] / 9.0)[:, None, None]
-        blk = sign[None, :, None, None, None] * sign[None, None, None, :, None] * dfdg[:, None, :, None, :]
-        mask = fc.u_mask[pen]
-        blk = blk.reshape(len(pen), 18, 18) * mask[:, :, None] * mask[:, None, :]
-        J.setValuesRCV(fc.g_u[pen], fc.g_u[pen], blk.reshape(len(pen), 324), addv=ADD)
-
-    def jacobian_varies(self, state):
-        """Whether the Jacobian depends on the iterate beyond the faces' states (slipping or penalty faces),
-        on all ranks."""
-        local = bool(np.any(state == ct.SLIP) or np.any(~self.faces.lagrange))
+    def jacobian_varies(self, state: np.ndarray) -> bool:
+        """Whether the Jacobian depends on the iterate beyond the faces' states (slipping faces), on all ranks.
+        Penalty faces' rows are the Lagrange rows on a jump affine in the tractions: as those, affine per state."""
+        local = bool(np.any(state == ct.SLIP))
         return self.faces.mpi.allreduce(local, op=MPI.LOR)
 
-    def stabilization_pattern(self):
-        """(rows, cols) global index pairs of the stabilisation blocks in rows this rank owns."""
-        return stabilization_pattern(self.pairs, self.faces.pos, self.faces.all_g_lm)
+    def pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) global index pairs of the bubbles' blocks (rows of any rank)."""
+        (f, dofs), (fa, fb) = self.bubbles.pattern()
+        g_lm, gd = self.faces.dofs.g_lm, self.bubbles.g_dofs(dofs)
+        rows = [np.repeat(g_lm[f], 12, axis=1), np.repeat(gd, 3, axis=1), np.repeat(g_lm[fa], 3, axis=1)]
+        cols = [np.tile(gd, (1, 3)), np.tile(g_lm[f], (1, 12)), np.tile(g_lm[fb], (1, 3))]
+        return (np.concatenate([r.ravel() for r in rows]).astype(np.int64),
+                np.concatenate([c.ravel() for c in cols]).astype(np.int64))
 
     # -- output -----------------------------------------------------------------------------------
-    def face_fields(self, x_loc):
-        """Per owned face: traction local (3), jump local (3), traction global (3), slip global (3), state."""
-        g, gl = self.faces.jumps(x_loc)
-        t = self.tractions(x_loc, gl)
+    def face_fields(self, x_loc: np.ndarray) -> tuple:
+        """Per owned face: traction local (3), jump local (3), traction global (3), slip global (3), state. The
+        jump is the one the law acts on: the face-mean jump with its bubble part."""
+        g, gl, t = self.law_jumps(x_loc)
         tg = np.einsum("nji,nj->ni", self.faces.R, t)
         slip_global = g - gl[:, :1] * self.faces.normal
         return t, gl, tg, slip_global, self.states(x_loc)

@@ -12,7 +12,6 @@ class FaultSettings:
     cohesion: float                # Pa
     friction_angle: float          # degrees
     method: str                    # lagrange | penalty
-    stabilization: bool
     penalty_normal: float          # Pa/m (0: automatic from the adjacent cells)
     penalty_tangential: float
 

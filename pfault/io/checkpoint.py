@@ -333,15 +333,16 @@ def restore(ckpt: dict[str, np.ndarray], attrs: dict[str, Any], model: Model, st
         prev.destroy()
     if "sigma0" in ckpt:
         state.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
-    if f is not None:
-        f.t0 = ckpt["faults/t0"][f.faces.face].copy()
-        f.set_pore_pressure(ckpt["faults/pn"][f.faces.face])
-        f.start_from(eq.local_array(state.u), ckpt["faults/traction"][f.faces.face])
-        state.fault_slid = ckpt["faults/slid"][f.faces.face] > 0.5
     flow = _flow(state)
     if flow is not None:
         flow.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
                      json.loads(bytes(ckpt["flow/history"]).decode()))
+    if f is not None:
+        f.t0 = ckpt["faults/t0"][f.faces.face].copy()
+        eq.loads.set(state.time)        # the face bubbles' loads of the checkpoint's time: the faces' start reads them
+        f.set_pore_pressure(ckpt["faults/pn"][f.faces.face])
+        f.start_from(eq.local_array(state.u), ckpt["faults/traction"][f.faces.face])
+        state.fault_slid = ckpt["faults/slid"][f.faces.face] > 0.5
 
 
 def load(comm: Any, run_dir: str, model: Model, state: State) -> tuple[dict[str, Any], list[dict[str, Any]]]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import errno
 import shutil
+from contextlib import nullcontext
 from typing import Any
 
 import numpy as np
@@ -45,7 +46,7 @@ def progress_line(step: int, rec: dict) -> str:
         why = f"reason {rec['reason']}"
         if rec.get("null_pivots"):
             why += (f"; singular Jacobian: {rec['null_pivots']} null pivots, part of the body held by nothing "
-                    "but open or unstabilised fault faces")
+                    "but open fault faces")
         extra += f"  NOT CONVERGED ({why})"
     return (f"step {step:4d} t = {format_time(rec['time_s'])}  newton {rec['newton_its']:2d}  "
             f"ksp {rec['ksp_its']:4d}" + (f"  LU {rec['factorizations']:2d}" if "factorizations" in rec else "")
@@ -171,9 +172,11 @@ class RunOutput:
         sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
         faults = None
         if m.faults is not None:
-            # the initial state: no face has slid yet, whenever it is written
+            # the initial state: no face has slid yet, whenever it is written; it is written after the first step
+            # is solved: its faces without that step's loads
             slid = np.zeros_like(state.fault_slid) if initial else state.fault_slid
-            faults = _fault_fields(m.faults, u_total, u_rel, slid)
+            with m.faults.bubbles.unloaded() if initial else nullcontext():
+                faults = _fault_fields(m.faults, u_total, u_rel, slid)
         head = m.source.vertex_head()
         return LocalStep(both, head, {"pore_pressure_change": dp, "stress": sig}, faults)
 
@@ -254,7 +257,7 @@ def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray, slid: np.ndar
     face's, as computed), its state (stick 0, slip 1, open 2) and whether it has slid (slipping or open at the
     end of a completed step, now or before: its slip is in the reported maxima)."""
     t_loc, _, t_glob, _, state = fs.face_fields(u_total)
-    g, gl = fs.faces.jumps(u_rel)
+    g, gl = fs.relative_jumps(u_rel)
     return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.faces.normal,
             "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.faces.normal,
             "slip_magnitude": np.linalg.norm(gl[:, 1:], axis=1), "state": np.asarray(state, dtype=np.int64),

@@ -16,6 +16,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .fault import _components
 from .serial import TET_FACES, face_keys
 
 if TYPE_CHECKING:
@@ -84,8 +85,9 @@ def dual_graph(tets: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray]:
     return offsets, neighbour[has].astype(PETSc.IntType)
 
 
-def _set_partition(dm, tets, nv):
-    """Partition the cells (all on rank 0) for DMPlexDistribute.
+def _set_partition(dm, tets, nv, together=None):
+    """Partition the cells (all on rank 0) for DMPlexDistribute. ``together`` (n, 2): pairs of cells to keep on one
+    rank (the two cells of each fault face, whose face bubbles are condensed together, pfault.faults.faces).
 
     The cells' dual graph is built here from the face keys and partitioned by PETSc's MatPartitioning (PT-Scotch,
     or ParMETIS if PETSc has it; ``-mat_partitioning_type`` chooses), handed to the distribution as a shell
@@ -127,6 +129,11 @@ def _set_partition(dm, tets, nv):
     target = PETSc.IS()
     mp.apply(target)
     rank_of = target.getIndices()
+    if together is not None and len(together):
+        # each set of cells joined by fault faces goes to the rank of its smallest cell
+        a = np.concatenate([together[:, 0], together[:, 1]])
+        label, _ = _components(nc, a, np.concatenate([together[:, 1], together[:, 0]]))
+        rank_of = rank_of[label]
     sizes = np.bincount(rank_of, minlength=comm.size).astype(PETSc.IntType)
     points = np.argsort(rank_of, kind="stable").astype(PETSc.IntType)
     part.setType(PETSc.Partitioner.Type.SHELL)
@@ -168,7 +175,8 @@ def build(comm: PETSc.Comm, serial: SerialMesh | None, cell_face_tag: np.ndarray
         dm.createLabel(name)
         if rank == 0:
             _set_label(dm.getLabel(name), *labels[name])
-    _set_partition(dm, serial_tets, nv)
+    together = np.column_stack([split.minus_cell, split.plus_cell]) if rank == 0 and split is not None else None
+    _set_partition(dm, serial_tets, nv, together)
     migration = dm.distribute() if comm.size > 1 else None      # migrates the labels with their points
     return _localise(dm, migration, nc, nv, fault_keys)
 

@@ -29,11 +29,11 @@ ITERATIVE_FROM_DOFS = 50_000
 
 
 def faults_need_direct(fault_settings: Iterable[FaultSettings]) -> bool:
-    """Whether a scene's faults rule out the iterative solver: a Lagrange fault without the traction-jump
-    stabilisation has no 3x3 face block for the Schur fieldsplit to eliminate its multipliers with
+    """Whether a scene's faults rule out the iterative solver: none do. Every Lagrange face has a negative
+    definite 3x3 block from its condensed bubbles for the Schur fieldsplit to eliminate its multipliers with
     (pfault.solver.fieldsplit.FieldSplit). Penalty faults add no unknowns: with penalty faults only,
     the iterative solver is the displacement split's AMG on the stiffness and the penalty springs."""
-    return any(f.method == "lagrange" and not f.stabilization for f in fault_settings)
+    return False
 
 
 def choose_solver(n_dofs: int, need_direct: bool = False) -> str:

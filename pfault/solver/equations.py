@@ -79,8 +79,10 @@ class Equations:
         finally:
             self.dm.setMatType(PETSc.Mat.Type.AIJ)
         Kb.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        self.asm.add_stiffness(Kb, blocked=Kb.getLGMap()[0].getBlockSize() == 3)
+        blocked = Kb.getLGMap()[0].getBlockSize() == 3
+        self.asm.add_stiffness(Kb, blocked=blocked)
         if self.faults is not None:
+            self.faults.add_stiffness(Kb, blocked)      # the condensed face bubbles
             self.faults.faces.insert_pattern(Kb)
         Kb.assemble()
         lgmap = Kb.getLGMap()
@@ -89,9 +91,11 @@ class Equations:
         K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         if self.faults is None:
             return K
-        # rebuilt with the stabilisation's pattern and block size 3 (every point carries 3, 6 or 3k dofs: AMG
-        # reads the block size from the matrix)
-        rows, cols = self.faults.stabilization_pattern()
+        # rebuilt with the pattern of the bubbles' blocks (beyond the cells' closures: a face's row reaches the
+        # plus cell's fourth vertex, a cell's rows the multipliers of its faces, a face's row those of the faces
+        # sharing a cell) and block size 3 (every point carries 3, 6 or 3k dofs: AMG reads the block size from the
+        # matrix)
+        rows, cols = _to_owners(K, *self.faults.pattern())
         K1 = _extend_pattern(K, rows, cols, bs=3)
         K.destroy()
         return K1
@@ -136,7 +140,7 @@ class Equations:
             return self.K
         A = self.J
         self.K.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        self.faults.add_glued(A)
+        self.faults.add_glued(A, self.dofmap.n_local)
         A.assemble()
         self._jacobian_key = None
         if not self.faults.jacobian_varies(np.full(self.faults.faces.nf, ct.STICK)):
@@ -224,6 +228,18 @@ class Equations:
             obj.destroy()
 
 
+def _to_owners(K: Any, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Global (row, col) pairs of any rank's rows -> those of the rows this rank owns, from all ranks."""
+    comm = K.getComm().tompi4py()
+    if comm.size == 1:
+        return rows, cols
+    ranges = np.asarray(K.getOwnershipRanges())
+    owner = np.searchsorted(ranges, rows, side="right") - 1
+    parts = comm.alltoall([(rows[owner == r], cols[owner == r]) for r in range(comm.size)])
+    return (np.concatenate([p[0] for p in parts]).astype(np.int64),
+            np.concatenate([p[1] for p in parts]).astype(np.int64))
+
+
 def _extend_pattern(K0: Any, rows: np.ndarray, cols: np.ndarray, bs: int = 1) -> Any:
     """A new AIJ matrix (block size bs) with K0's values and pattern plus explicit zeros at (rows, cols) (owned
     rows)."""
@@ -232,7 +248,7 @@ def _extend_pattern(K0: Any, rows: np.ndarray, cols: np.ndarray, bs: int = 1) ->
     nrows = rend - rstart
     rows = np.asarray(rows, np.int64) - rstart
     if len(rows) and (rows.min() < 0 or rows.max() >= nrows):
-        raise RuntimeError("stabilisation rows must be owned")
+        raise RuntimeError("extra pattern rows must be owned")
     ncols = K0.getSize()[1]
     # K0's rows are sorted and without repeats (an assembled AIJ matrix), so its keys row * ncols + col are
     # sorted: the new entries are placed by binary search instead of sorting all entries again (paper-size

@@ -19,26 +19,27 @@ class FieldSplit:
     With -pc_fieldsplit_type schur the multipliers are eliminated first and the displacement carries the Schur
     complement K - B D^-1 C. Its "selfp" approximation with the exact 3x3 blocks of D per face
     (-fieldsplit_displacement_mat_schur_complement_ainv_type blockdiag) is the elastic stiffness plus, across
-    every closed face, springs of stiffness A^2 / S_face in the directions the face's state constrains (S_face:
-    the face's traction-jump stabilisation, 1 % of the local compliance estimate, so about 100 times the local
-    stiffness): an augmented Lagrangian whose coefficient comes from the discretisation. It keeps the
-    displacement block nonsingular where a fault holds a body, and the outer iterations independent of the
-    mesh size (pfault/solver/options/iterative.opts). A stuck face without stabilisation has D = 0, which is why
-    pfault.model rejects that combination.
+    every closed face, springs in the directions the face's state constrains: a closed face's D is its law's
+    derivative times the condensed bubbles' block C K_bb^-1 C^T / A (pfault.faults.bubbles), so the springs are
+    the stiffness of the bubbles of the face's two cells, of the order of the local stiffness: an augmented
+    Lagrangian whose coefficient comes from the discretisation. It keeps the displacement block nonsingular
+    where a fault holds a body (pfault/solver/options/iterative.opts). Where faces share a cell their blocks
+    couple; only each face's own 3x3 block is used.
 
-    A scene without faults, or whose faults are all penalty faults, has no multiplier field: the whole unknown
-    is the displacement, and the PC becomes the displacement split's (its options, -fieldsplit_displacement_*)."""
+    A scene without faults has no multiplier field (every fault face, Lagrange or penalty, carries its traction
+    as multipliers): the whole unknown is the displacement, and the PC becomes the displacement split's (its
+    options, -fieldsplit_displacement_*)."""
 
     def __init__(self, equations: Any, pc: Any) -> None:
         self.objects: list = []
         if pc.getType() != PETSc.PC.Type.FIELDSPLIT:
             return
         f = equations.faults
-        if f is None or not f.faces.has_lagrange:
+        if f is None:
             _displacement_only(pc)
             return
         loc = np.zeros(equations.dofmap.n_local)
-        loc[f.faces.lm_dofs[np.nonzero(f.faces.lagrange)[0]].ravel()] = 1.0
+        loc[f.faces.lm_dofs.ravel()] = 1.0
         g = equations.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
         start, _ = g.getOwnershipRange()
         mark = g.getArray() > 0.5

@@ -69,9 +69,15 @@ class Loads:
         loc = self.static_local.copy()
         for b, fl in self.surface_loads:
             loc += b.scale(t) * fl
+        faults = self.eq.faults
         if self.source.active:
             with logged("pfaultPorePressureLoad"):
-                self.asm.pore_pressure_load(self.source.cell_dp(t), loc)
+                dp = self.source.cell_dp(t)
+                self.asm.pore_pressure_load(dp, loc)
+                if faults is not None:      # the Biot load of the face bubbles (alpha dp div(phi) is not zero)
+                    faults.set_bubble_load(faults.bubbles.pore_pressure_load(self.asm.alpha * dp), loc)
+        elif faults is not None:
+            faults.set_bubble_load(np.zeros_like(faults.bubbles.fb), loc)
         self.eq.to_global(loc, out=self.f)
         for b, g, lift in self.lifts:
             self.f.axpy(b.scale(t), lift)
@@ -103,10 +109,17 @@ class Loads:
             p = np.maximum(p, 0.0)
         return self.asm.alpha[f.faces.cell] * p
 
-    def gravity(self, out: Any) -> None:
-        """The gravity load vector (zero on constrained dofs) into ``out``."""
+    def gravity(self, out: Any, with_faults: bool = True) -> None:
+        """The gravity load vector (zero on constrained dofs) into ``out``; with faults, that of the glued faces'
+        bubbles too (their condensed load and the right-hand side of the glued faces' rows)."""
         grav = np.zeros(self.dofmap.n_local)
         self.asm.gravity_load(self.settings.gravity, grav)
+        faults = self.eq.faults
+        if faults is not None and with_faults:
+            b = np.zeros((len(self.asm.vol), 3))
+            b[:, 2] = -self.asm.density * self.settings.gravity
+            faults.set_bubble_load(faults.bubbles.body_load(b), grav)
+            faults.glued_load(grav)
         self.eq.to_global(grav, out=out)
         out.getArray()[self.eq.bc_local_owned] = 0.0
 
@@ -116,7 +129,7 @@ class Loads:
             self._gravity_norm = 0.0
             if self.settings.geostatic:
                 g = self.eq.create_vec()
-                self.gravity(g)
+                self.gravity(g, with_faults=False)      # (a scale: the bubbles' load stays the step's)
                 self._gravity_norm = g.norm()
                 g.destroy()
         return self._gravity_norm

@@ -116,7 +116,7 @@ class FactorReuse:
                 self.null_pivots = mumps_null_pivots(ksp.getPC())
             self._factoring = None
             # Factors of a singular Jacobian (MUMPS fixes its null pivots: -mat_mumps_icntl_24 1) solve a
-            # consistent system in one iteration (the unstabilised two-blocks test: 1 in each Newton iteration)
+            # consistent system in one iteration (two blocks, one held by nothing: 1 in each Newton iteration)
             # and an inconsistent one never: part of the body held by nothing but open faces ran FGMRES to
             # -ksp_max_it (10000 iterations) in every attempt of the step. Such factors are not kept and their
             # solves stop after SINGULAR_MAX_IT iterations; SNES then reports the failed linear solve
@@ -218,14 +218,14 @@ class StepSolver:
                                    f"without it (-pfault_geostatic false)")
         state.sigma0 = eq.geostatic_stress(eq.local_array(ug))
         ug.destroy()
+        eq.loads.set(0.0)       # the face bubbles' load back from gravity's to that of the start
         state.u.set(0.0)
         if faults is not None:
             # set once (the glued operator and the gravity load do not depend on it), before the laws start
             faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
             faults.t0 = faults.initial_tractions(state.sigma0)
             loc = eq.local_array(state.u)
-            lag = np.nonzero(faults.faces.lagrange)[0]
-            loc[faults.faces.lm_dofs[lag]] = faults.t0[lag]
+            loc[faults.faces.lm_dofs] = faults.t0
             eq.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=state.u)
             faults.start_from(loc, faults.t0)     # penalty faces too: their shear starts from the initial one
 

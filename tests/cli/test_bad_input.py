@@ -132,11 +132,6 @@ CASES = [
                                                             "-pfault_solver", write(tmp / "solver.opts",
                                                                                     "-ksp_type cg -pc_type gamg\n")],
          1, "solver.opts line 1: two options on one line (-ksp_type ... -pc_type)"),
-    Case("iterative_solver_without_stabilisation",
-         lambda tmp, out, ranks: ["-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out),
-                                  "-pfault_solver", "iterative", "-pfault_fault_fault_stabilization", "false"], 1,
-         "-pfault_fault_fault_stabilization false: the fieldsplit solver eliminates the multipliers through the "
-         "stabilisation's face blocks; keep the stabilisation or use -pfault_solver mumps"),
     Case("missing_options_file_on_command_line", scene("-options_file", "none.opts"), 1,
          "on the command line: -options_file none.opts: no such file"),
     # option values: exit 1

@@ -50,7 +50,7 @@ def solve(p, f, x, F, pc):
     smax, smin = ksp.computeExtremeSingularValues()
     # the solution's largest fault jump (stick: the exact answer is zero; penalty: ~ |t| / k)
     dx.axpy(1.0, x)
-    _, gl = f.faces.jumps(p.local_array(dx))
+    gl = f.law_jumps(p.local_array(dx))[1]
     jump = float(np.max(np.linalg.norm(gl, axis=1), initial=0.0))
     jump = f.faces.mpi.allreduce(jump, op=MPI.MAX)
     ksp.destroy()

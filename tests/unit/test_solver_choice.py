@@ -8,10 +8,9 @@ import pytest
 from pfault.faults.settings import FaultSettings
 from pfault.solver.choice import (ITERATIVE_FROM_DOFS, choose_solver, faults_need_direct, solver_file_name)
 
-LAGRANGE = FaultSettings("f", cohesion=0.0, friction_angle=30.0, method="lagrange", stabilization=True,
-                         penalty_normal=0.0, penalty_tangential=0.0)
-UNSTABILISED = dataclasses.replace(LAGRANGE, name="g", stabilization=False)
-PENALTY = dataclasses.replace(LAGRANGE, name="p", method="penalty", stabilization=False)
+LAGRANGE = FaultSettings("f", cohesion=0.0, friction_angle=30.0, method="lagrange", penalty_normal=0.0,
+                         penalty_tangential=0.0)
+PENALTY = dataclasses.replace(LAGRANGE, name="p", method="penalty")
 
 
 def test_threshold_splits_the_sizes():
@@ -30,16 +29,15 @@ def test_threshold_sits_in_the_measured_crossover():
 
 
 @pytest.mark.parametrize("faults, direct", [((), False), ((LAGRANGE,), False), ((PENALTY,), False),
-                                            ((LAGRANGE, PENALTY), False), ((UNSTABILISED,), True),
-                                            ((LAGRANGE, UNSTABILISED), True)])
-def test_unstabilised_lagrange_faults_need_the_direct_solver(faults, direct):
+                                            ((LAGRANGE, PENALTY), False)])
+def test_no_fault_needs_the_direct_solver(faults, direct):
     assert faults_need_direct(faults) is direct
     assert solver_file_name("auto", 10 * ITERATIVE_FROM_DOFS, faults) == ("mumps" if direct else "iterative")
 
 
 def test_a_named_solver_is_kept():
     for name in ("mumps", "iterative", "gamg", "config/solver/mumps.opts", ""):
-        assert solver_file_name(name, 10 * ITERATIVE_FROM_DOFS, (UNSTABILISED,)) == name
+        assert solver_file_name(name, 10 * ITERATIVE_FROM_DOFS, (LAGRANGE,)) == name
         assert solver_file_name(name, 10, (), pc_type_given=True) == name
 
 
