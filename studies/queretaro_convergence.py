@@ -6,14 +6,24 @@ that each change one thing, to find why the slip potency shrinks with the mesh.
 Each case runs the scene on 2 ranks (one run at a time) into runs/queretaro_convergence/<case>/ at size factor 6, 4,
 3 or 2 (the case's name ends in -sf<F>); then one table of year 10 is printed and written to
 runs/queretaro_convergence/table.md, with the measures of studies/fault_convergence.py (fault.h5 and summary.json)
-as totals over the fault (m^3, m^2; the fault is 30 km long) and the depth of the deepest slipping face.
+as totals over the fault (m^3, m^2; the fault is 30 km long), the depth of the deepest slipping face, and the
+median shear traction of the top row of faces (those touching the land surface, within 5 km along the fault of
+the wells' middle) and its ratio to their effective
+normal traction (above tan 30 = 0.577 in a glued run: the row would slip).
 
 The variants (one change each, applied in the child process where it is not an option):
-``base``: the scene as it is; ``litho``: the initial stress of flat layers (sigma_v = -rho g depth of each cell's
-own material, K0 rule as the scene's) instead of the elastic gravity solve's sigma_v, which near the fault carries
-the arching of the soft sediment hung on the rock; ``frac0.1``, ``frac0.001``: the
-traction-jump stabilisation at that share of the compliance estimate; ``penalty``: penalty faces at their default
-stiffness; ``k01``: K0 = 1; ``glued``: cohesion 1e4 MPa (no face slips: the elastic shear demand on the fault).
+``base``: the scene as it is. The mesh: ``lat4``: the element size along and across the fault a quarter of the
+scene's (-pfault_queretaro_fault_size 13 instead of 52 m at size factor 1; the layers unchanged); ``vert4``: layers
+a quarter as thick (pfault.mesh.geometry._QRO_DZ; the lateral sizes unchanged); ``iso``: the size at the fault equal
+to the layer thickness (-pfault_queretaro_fault_size 7.142857, 50/7 m: elements about as wide as high beside the
+fault). The initial state:
+``litho``: the initial stress of flat layers (sigma_v = -rho g depth of each cell's own material, the scene's K0
+rule) instead of the elastic gravity solve's sigma_v, which beside the fault carries the soft sediment hung on the
+rock; ``k01``: K0 = 1. The pore pressure: ``rockdry``: no pore-pressure change in the rock (the flow model's head
+is continuous across the fault, so the rock cells touching it take part of the aquifer's drawdown); ``claydry``: none
+in the clay; ``dry500``: none within 500 m of the fault (rock and sediment). The contact: ``frac0.1``,
+``frac0.001``: the traction-jump stabilisation at that share of the compliance estimate; ``penalty``: penalty faces
+at their default stiffness; ``glued``: cohesion 1e4 MPa (no face slips: the shear the fault is asked to carry), ``glued-lat4``: both.
 """
 
 from __future__ import annotations
@@ -33,14 +43,24 @@ RUNS = os.path.join(ROOT, "runs", "queretaro_convergence")
 SCENE = os.path.join(ROOT, "config", "queretaro_calibrated.opts")
 QUIET = ["-pfault_figures", "false"]
 FACTORS = ("6", "4", "3", "2")
+WELLS_Y = 15000.0       # the wells' mid y (m)
+CLAY = 20.0             # the clay's thickness (m)
+ROCK_X = 10000.0        # the fault plane; rock for x < ROCK_X (pfault.mesh.geometry.QUERETARO_DEFAULTS)
 VARIANTS = {
     "base": ([], {}),
     "litho": ([], {"litho": True}),
+    "rockdry": ([], {"rockdry": True}),
+    "claydry": ([], {"claydry": True}),
+    "dry500": ([], {"dry500": True}),
+    "lat4": (["-pfault_queretaro_fault_size", "13"], {}),
+    "vert4": ([], {"vertical": 0.25}),
+    "iso": (["-pfault_queretaro_fault_size", "7.142857"], {}),
     "frac0.1": ([], {"frac": 0.1}),
     "frac0.001": ([], {"frac": 0.001}),
     "penalty": (["-pfault_fault_fault_method", "penalty"], {}),
     "k01": (["-pfault_geostatic_k0", "1"], {}),
     "glued": (["-pfault_fault_fault_cohesion", "1e4*MPa"], {}),
+    "glued-lat4": (["-pfault_fault_fault_cohesion", "1e4*MPa", "-pfault_queretaro_fault_size", "13"], {}),
 }
 CASES = {f"{v}-sf{f}": (f, opts, patch) for v, (opts, patch) in VARIANTS.items() for f in FACTORS}
 
@@ -76,6 +96,25 @@ def child(patch, argv):
 
 
 def _patch(patch):
+    if patch.get("vertical"):
+        from pfault.mesh import geometry
+        geometry._QRO_DZ *= patch["vertical"]
+    if patch.get("rockdry") or patch.get("claydry") or patch.get("dry500"):
+        from pfault.solver import flow
+        cell_dp = flow.GroundwaterFlow.cell_dp
+
+        def without(self):
+            dp = cell_dp(self)
+            mesh = self.grid.mesh
+            c = mesh.coords[mesh.cells].mean(axis=1)
+            if patch.get("rockdry"):
+                dry = c[:, 0] < ROCK_X
+            elif patch.get("claydry"):
+                dry = (c[:, 0] > ROCK_X) & (c[:, 2] > -CLAY)
+            else:
+                dry = c[:, 0] < ROCK_X + 500.0
+            return np.where(dry, 0.0, dp)
+        flow.GroundwaterFlow.cell_dp = without
     if patch.get("frac"):
         from pfault.faults import stabilization
         stabilization.stabilization_pairs = functools.partial(stabilization.stabilization_pairs,
@@ -111,11 +150,17 @@ def measures(out):
         pts, cells = f["mesh/points"][()], f["mesh/cells"][()]
         s = f["steps"][sorted(f["steps"].keys())[-1]]
         state = s["state"][()].astype(int)
+        shear = np.linalg.norm(s["traction_shear"][()], axis=1)
+        normal = s["traction_normal_effective"][()]
     strike = float(np.ptp(pts[:, 1]))
     for k in ("potency", "potency_moving", "open_volume", "slip_length", "open_length", "potency_top10m"):
         m[k] *= strike
     x = pts[cells]
     m["row_depth"] = float(np.median(np.ptp(x[:, :, 2], axis=1)))
+    # the row of faces under the land surface, along the 10 km of fault beside the wells (y = 12..18 km)
+    top = (x[:, :, 2].max(axis=1) > -1e-6) & (np.abs(x[:, :, 1].mean(axis=1) - WELLS_Y) < 5000.0)
+    m["top_shear"] = float(np.median(shear[top]))
+    m["top_ratio"] = float(np.median(shear[top] / np.maximum(np.abs(normal[top]), 1.0)))
     m["slip_depth"] = float(-x[state > 0][:, :, 2].min()) if np.any(state > 0) else 0.0
     return m
 
@@ -124,6 +169,8 @@ COLUMNS = [("faces", "fault faces", "{:d}"), ("row_depth", "face height m", "{:.
            ("newton_worst", "Newton (worst step)", "{:d}"), ("potency", "potency m^3", "{:.4g}"),
            ("potency_top10m", "of faces above 10 m", "{:.4g}"), ("slip_length", "slipping area m^2", "{:.4g}"),
            ("open_length", "open area m^2", "{:.3g}"), ("slip_depth", "deepest slipping face m", "{:.3g}"),
+           ("top_shear", "top row shear traction Pa (median)", "{:.3g}"),
+           ("top_ratio", "top row shear / effective normal (median)", "{:.3g}"),
            ("max_slip_moving", "max slip m", "{:.4g}"), ("max_opening_open", "max opening m", "{:.3g}"),
            ("max_subsidence", "max subsidence m", "{:.4g}")]
 
