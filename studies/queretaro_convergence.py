@@ -23,7 +23,8 @@ rock; ``k01``: K0 = 1. The pore pressure: ``rockdry``: no pore-pressure change i
 is continuous across the fault, so the rock cells touching it take part of the aquifer's drawdown); ``claydry``: none
 in the clay; ``dry500``: none within 500 m of the fault (rock and sediment). The contact: ``frac0.1``,
 ``frac0.001``: the traction-jump stabilisation at that share of the compliance estimate; ``penalty``: penalty faces
-at their default stiffness; ``glued``: cohesion 1e4 MPa (no face slips: the shear the fault is asked to carry), ``glued-lat4``: both.
+at their default stiffness; ``glued``: cohesion 1e4 MPa (no face slips: the shear the fault is asked to carry);
+``glued-lat4``: glued and lat4.
 """
 
 from __future__ import annotations
