@@ -65,6 +65,10 @@ SPECS = [
        "x below it (domain 30 km x 30 km x 50 m)"),
     _s("pfault_queretaro_clay_thickness", "quantity", 20.0, "m", "queretaro: clay aquitard thickness over "
        "the sand aquifer (down to 50 m)"),
+    _s("pfault_queretaro_fault_size", "quantity", 52.0, "m", "queretaro: element size along and across the "
+       "fault at size factor 1 (times -pfault_mesh_size_factor); 52 m gives the paper's 8,074 fault faces, the "
+       "layers' 50/7 m elements as wide as high beside the fault, which the fault's slip needs to converge "
+       "(docs/verification.md, calibrated Queretaro)"),
     _s("pfault_queretaro_wells", "list", "12000,12000,12000,15000,12000,18000", "m", "queretaro: well "
        "positions x1,y1,x2,y2,... in the aquifer; the mesh is refined around them (default: -pfault_flow_wells "
        "when given)"),

@@ -55,8 +55,8 @@ QUERETARO_DEFAULTS: dict[str, Any] = dict(
     fault_x=10000.0,                 # x of the vertical fault plane; rock for x < fault_x (m)
     clay_thickness=20.0,             # clay aquitard 0..20 m over the sand aquifer 20..50 m (m)
     wells=QUERETARO_WELLS,           # (x, y) of the pumping wells (m); refinement only
+    fault_size=52.0,                 # element size along and across the fault at size_factor 1 (m)
 )
-_QRO_H_FAULT = 52.0
 _QRO_GROWTH = 0.25
 _QRO_H_WELL = 40.0
 _QRO_H_MAX = 1000.0
@@ -376,6 +376,9 @@ def _queretaro_params(params):
         raise InputError(f"-pfault_queretaro_fault_x: must lie in [{0.05 * lx:g}, {0.95 * lx:g}] m, got {xf:g}")
     if not 1.0 <= tc <= depth - 1.0:
         raise InputError(f"-pfault_queretaro_clay_thickness: must lie in [1, {depth - 1:g}] m, got {tc:g}")
+    hf = p["fault_size"] = _real(p["fault_size"], "pfault_queretaro_fault_size")
+    if not 1.0 <= hf <= _QRO_H_MAX:
+        raise InputError(f"-pfault_queretaro_fault_size: must lie in [1, {_QRO_H_MAX:g}] m, got {hf:g}")
     wells = p["wells"]
     try:
         arr = np.asarray(wells, dtype=float)
@@ -415,8 +418,11 @@ def queretaro_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     layers keep the layer interfaces, the fault and the vertical resolution exact whatever the lateral
     size; the fault is the extrusion of the edge the rock and sediment parts of the land surface share
     after an OCC fragment, so its triangles are shared by the tetrahedra on both sides. Lateral sizes
-    (times ``size_factor``): 52 m along the fault (577 segments over 30 km, x 7 layers x 2 = 8078 fault
-    triangles) and 40 m at the wells, growing by 0.25 m per metre of distance, at most 1 km.
+    (times ``size_factor``): ``fault_size`` (52 m) along the fault (577 segments over 30 km, x 7 layers x 2 =
+    8078 fault triangles) and 40 m at the wells, growing by 0.25 m per metre of distance, at most 1 km. The
+    fault's slip converges under refinement only with elements about as wide as high beside the fault
+    (``fault_size`` 50/7 m, the layer thickness): with 52 m the stuck fault carries the drawdown load of a
+    column of sediment as wide as the elements beside it (docs/verification.md, calibrated Queretaro).
     """
     f = _check_factor(size_factor)
     p = _queretaro_params(params)
@@ -424,7 +430,7 @@ def queretaro_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
         volumes = _queretaro_volumes(gmsh.model.occ, p, f)
         _queretaro_groups(gmsh, volumes, p)
         xf = p["fault_x"]
-        terms = [f"{_QRO_H_FAULT!r} + {_QRO_GROWTH!r}*Abs(x-{xf!r})"]
+        terms = [f"{p['fault_size']!r} + {_QRO_GROWTH!r}*Abs(x-{xf!r})"]
         for wx, wy in p["wells"]:
             terms.append(f"{_QRO_H_WELL!r} + {_QRO_GROWTH!r}*Sqrt((x-{wx!r})*(x-{wx!r})+(y-{wy!r})*(y-{wy!r}))")
         expr = f"{_QRO_H_MAX!r}"

@@ -189,6 +189,8 @@ def test_deterministic_and_leaves_callers_gmsh_alone():
     (geometry.queretaro_mesh, {"size_factor": -2.0}, "-pfault_mesh_size_factor"),
     (geometry.queretaro_mesh, {"fault_x": 40000.0}, "-pfault_queretaro_fault_x"),
     (geometry.queretaro_mesh, {"clay_thickness": 50.0}, "-pfault_queretaro_clay_thickness"),
+    (geometry.queretaro_mesh, {"fault_size": 0.5}, "-pfault_queretaro_fault_size"),
+    (geometry.queretaro_mesh, {"fault_size": "x"}, "-pfault_queretaro_fault_size"),
     (geometry.queretaro_mesh, {"wells": [12000.0, 12000.0, 13000.0]}, "-pfault_queretaro_wells"),
     (geometry.queretaro_mesh, {"wells": [5000.0, 12000.0]}, "-pfault_queretaro_wells"),
 ])
@@ -215,6 +217,22 @@ class _Reader:
         if spec.kind == "list" and isinstance(value, str):
             return parse_list(value, name)
         return value
+
+
+def test_queretaro_fault_size():
+    """-pfault_queretaro_fault_size sets the element size along and across the fault (times the size factor),
+    the layers unchanged: a quarter of the default gives four times the fault triangles, each a quarter as long."""
+    from types import SimpleNamespace
+
+    from pfault.scene import generator_options
+    settings = SimpleNamespace(mesh_file="", mesh_generator="queretaro")
+    meshes = [generator_options(_Reader({"pfault_mesh_size_factor": 4.0, "pfault_queretaro_fault_size": h}),
+                                settings)() for h in (52.0, 13.0)]
+    faces = [len(m.surfaces["fault"]) for m in meshes]
+    assert 3.6 < faces[1] / faces[0] < 4.4
+    along = [np.median(np.ptp(m.points[m.surfaces["fault"]][:, :, 1], axis=1)) for m in meshes]
+    assert along[0] == pytest.approx(4 * 52.0, rel=0.1) and along[1] == pytest.approx(4 * 13.0, rel=0.1)
+    assert [np.unique(np.round(m.points[:, 2], 6)).size for m in meshes] == [3, 3]
 
 
 def test_scene_generators():
