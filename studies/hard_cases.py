@@ -163,6 +163,28 @@ def cycle_opening(tol=1e-6):
                      evaluate)
 
 
+def cohesive_cycle(tensile_strength, tol=1e-6):
+    """Two-blocks cycle (CYCLE) with cohesion: pulled, every face open and carrying the tensile strength
+    T = c / tan(phi) (the apex of its Mohr-Coulomb cone, pfault.faults.contact.tensile_strength), so opened by
+    less than the pull; pushed, every face stuck. Value: the largest relative error of the open faces' effective
+    normal traction against T at the last step (pulled)."""
+    def evaluate(res, runs):
+        n = res.summary["mesh"]["fault_faces"]
+        wrong = []
+        for st in res.steps:
+            pull = CYCLE_SCALE[round(st["time_s"], 6)] * 1e-3
+            if pull > 0 and (st["open"] != n or not 0.0 < st["max_fault_opening_m"] < pull):
+                wrong.append(f"t = {st['time_s']:g}: {st['open']}/{n} open, opening {st['max_fault_opening_m']:g}")
+            elif pull <= 0 and st["stick"] != n:
+                wrong.append(f"t = {st['time_s']:g}: {st['stick']}/{n} stuck")
+        tn = res.fault().cell_data["traction_normal_effective"]
+        value = float(np.max(np.abs(tn - tensile_strength)) / tensile_strength)
+        ok = value <= tol and not wrong and len(res.steps) == len(CYCLE_SCALE)
+        return Verdict(value, ok, "; ".join(wrong))
+    return Invariant("pulled: all open at the tensile strength c/tan(phi) (max error / T); pushed: all stuck",
+                     f"<= {tol:g}", evaluate)
+
+
 def path_independence(ref, tol=1e-6):
     """Proportional loading: the final opening and slip fields equal those of run ``ref`` (relative 2-norm)."""
     def evaluate(res, runs):
@@ -350,9 +372,11 @@ def cases():
         opts, exact = two_blocks_shear(phi, 0.6)
         out.append(Case(f"friction_{phi}", f"friction angle {phi} deg ({'stick' if exact == 0 else 'slip'})",
                         TWO_BLOCKS, analytic_slip(exact, scale=0.6), opts, quick=phi in (1, 60)))
-    out.append(Case("cohesion_cutoff", "c = 1 MPa with the tension cut-off: pushed, pulled, pushed, pulled (a cone "
-                    "without cut-off would hold c/tan(phi) = 1.7 MPa of tension)", TWO_BLOCKS, cycle_opening(),
-                    CYCLE + _opt("-pfault_fault_fault_cohesion", "1e6"), quick=True))
+    # the pulls of CYCLE stretch the glued blocks by up to ~55 kPa: c = 10 kPa opens them at 17 kPa
+    out.append(Case("cohesion_cutoff", "c = 10 kPa: pushed, pulled, pushed, pulled; the faces open at the apex of "
+                    "the cone, c/tan(phi) = 17 kPa of tension, and carry it while open", TWO_BLOCKS,
+                    cohesive_cycle(1e4 / np.tan(np.radians(30.0))), CYCLE + _opt("-pfault_fault_fault_cohesion", "1e4"),
+                    quick=True))
     out += _step_cases()
     out.append(Case("cycle_two_blocks", "pressed, pulled open, pressed shut, reopened (c = 0)", TWO_BLOCKS,
                     cycle_opening(), CYCLE, quick=True))
