@@ -578,13 +578,12 @@ def solver_history(results):
 
 
 SOLVER_NOTES = (
-    "The maxima moved with the discretisation, not with the solver: the traction-jump stabilisation now acts on "
-    "the tractions' change since the initial state at 1 % of the local compliance estimate (README, \"Faults and "
-    "fissures\"). At the full estimate a closed face next to an open or slipping one behaved as if held by a "
-    "spring of about E/h; on calibrated Queretaro at size factor 2 the slip potency (area integral of the slip) "
-    "fell from 12,416 to 9,723 m^3, against 9,640 m^3 extrapolated from penalty faces at 1e7 and 1e8 Pa/m "
-    "(15,807 and 10,253 m^3), and a proportional loading in 1 or 40 steps now ends at the same state. Wuxi's "
-    "fully open fissure is unaffected.")
+    "The maxima moved with the discretisation, not with the solver. The \"before\" column was measured with the "
+    "traction-jump stabilisation on another machine (AMD EPYC); \"now\" has the face bubbles that replaced it "
+    "(docs/theory.md, \"Face bubbles\"): a closed face has no opening and a stuck face no slip increment to the "
+    "solver's tolerance, and the maxima are over the open and the slid faces (summary.json). Calibrated "
+    "Queretaro's fault answer depends on the width of the elements beside the fault, which the paper's mesh sets "
+    "(docs/verification.md, \"calibrated Queretaro\"). Wuxi's fully open fissure is unaffected.")
 
 
 def targets_text(results):
