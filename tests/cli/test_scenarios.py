@@ -13,29 +13,11 @@ import subprocess
 
 import pytest
 
-from conftest import PY, REPO, mpi_env
+from conftest import FLOW_BOX, PY, REPO, mpi_env
 
 TIMEOUT = 300
-BOX = """# a 2x2x2-cell box drained by one well for a day
--pfault_box_size 10,10,20
--pfault_box_cells 2,2,2
--pfault_material_soil_young_modulus 10*MPa
--pfault_material_soil_poisson_ratio 0.25
--pfault_material_soil_hydraulic_conductivity 1*m/day
--pfault_bc_xmin_type roller
--pfault_bc_xmax_type roller
--pfault_bc_ymin_type roller
--pfault_bc_ymax_type roller
--pfault_bc_bottom_type fixed
--pfault_flow true
--pfault_flow_wells 5,5
--pfault_flow_well_screen -1,-15
--pfault_flow_well_rate 0:0,1*day:3*L/s
--pfault_flow_fixed_head_surfaces xmin
--pfault_time_end 1*day
--pfault_time_steps 2
--pfault_solver mumps
-"""
+# the flow box (conftest) for a day in two steps
+BOX = FLOW_BOX + "-pfault_time_end 1*day\n-pfault_time_steps 2\n"
 PLANS = """# every plan: the well screen as in the scene (a common option)
 -pfault_flow_well_screen -1,-15
 [halved]

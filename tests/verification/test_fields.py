@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import OEDOMETER, TWO_BLOCKS, compare_runs, read_last_step, run_scene
+from conftest import OEDOMETER, TWO_BLOCKS, compare_runs, read_last_step, run_scene, write_flow_box
 
 SITE = "config/site_example/site.opts"
 
@@ -130,28 +130,6 @@ def test_modulus_linear_in_depth_converges_at_rate_2(tmp_path):
     assert np.all((rates > 1.8) & (rates < 2.2)), rates
 
 
-FLOW_BOX = """# a 2x2x2-cell box drained by one well
--pfault_box_size 10,10,20
--pfault_box_cells 2,2,2
--pfault_material_soil_young_modulus {young}
--pfault_material_soil_poisson_ratio 0.25
--pfault_material_soil_hydraulic_conductivity {conductivity}
--pfault_bc_xmin_type roller
--pfault_bc_xmax_type roller
--pfault_bc_ymin_type roller
--pfault_bc_ymax_type roller
--pfault_bc_bottom_type fixed
--pfault_flow true
--pfault_flow_wells 5,5
--pfault_flow_well_screen -1,-15
--pfault_flow_well_rate 0:0,1*day:3*L/s
--pfault_flow_fixed_head_surfaces xmin
--pfault_time_end 1*day
--pfault_time_steps 2
--pfault_solver mumps
-"""
-
-
 def test_uniform_fields_give_the_numbers_results(tmp_path):
     """A field that holds one value everywhere gives the run of that number: the flow model's conductivity and
     default storage (from a modulus field, per cell), and the fault's stiffness estimates (two blocks)."""
@@ -159,9 +137,10 @@ def test_uniform_fields_give_the_numbers_results(tmp_path):
     (tmp_path / "k.csv").write_text("x,y,K [m/day]\n-1,-1,1\n11,-1,1\n-1,11,1\n11,11,1\n")
     for name, young, k in (("numbers", "10*MPa", "1*m/day"), ("fields", f"field:{tmp_path / 'e.csv'}",
                                                                f"field:{tmp_path / 'k.csv'}")):
-        scene = tmp_path / f"flow_{name}.opts"
-        scene.write_text(FLOW_BOX.format(young=young, conductivity=k))
-        run_scene(str(scene), tmp_path / f"flow_{name}")
+        run_scene(write_flow_box(tmp_path), tmp_path / f"flow_{name}",
+                  extra=["-pfault_time_end", "1*day", "-pfault_time_steps", "2",
+                         "-pfault_material_soil_young_modulus", young,
+                         "-pfault_material_soil_hydraulic_conductivity", k])
     assert compare_runs(tmp_path / "flow_numbers", tmp_path / "flow_fields", rtol=1e-12) < 1e-12
     run_scene(TWO_BLOCKS, tmp_path / "blocks_numbers")
     (tmp_path / "e2.csv").write_text("z,E [MPa]\n-1,10\n0,10\n")
