@@ -100,6 +100,12 @@ def run(name):
            cutoff, SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *QUIET, *opts]
     if ranks > 1:
         cmd = ["mpirun", "-n", str(ranks), *cmd]
+    run_logged(name, cmd, out)
+
+
+def run_logged(name, cmd, out):
+    """Run ``cmd`` from the repository's root with its output in ``out``/stdout.txt; ``out``/case.json records the
+    command, its exit code and wall time (the studies' measures read them)."""
     env = dict(os.environ, OMP_NUM_THREADS="1")
     t0 = time.time()
     with open(os.path.join(out, "stdout.txt"), "w") as log:

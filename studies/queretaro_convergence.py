@@ -33,9 +33,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
-import time
 
 import numpy as np
 
@@ -75,13 +73,8 @@ def run(name):
     cmd = ["mpirun", "-n", "2", sys.executable, os.path.join(ROOT, "benchmarks", "queretaro_convergence.py"),
            "--child", json.dumps(patch), SCENE, "-pfault_mesh_size_factor", f, "-pfault_output_dir", out,
            *QUIET, *opts]
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    t0 = time.time()
-    with open(os.path.join(out, "stdout.txt"), "w") as log:
-        rc = subprocess.run(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=env).returncode
-    with open(os.path.join(out, "case.json"), "w") as fh:
-        json.dump({"command": cmd, "exit_code": rc, "wall_s": time.time() - t0}, fh)
-    print(f"{name}: exit {rc}, {time.time() - t0:.0f} s", flush=True)
+    from studies.fault_convergence import run_logged
+    run_logged(name, cmd, out)
 
 
 def child(patch, argv):
