@@ -12,9 +12,10 @@ Physical names: volume ``solid``; surfaces ``crack``, ``bottom`` (z = -L), ``top
 Element sizes: h = a/n within 0.25 a of the crack, growing beyond as h * 1.2 d/a with the distance d, capped at
 L/4 (as tests/scripts/penny_mesh.py, so that the meshes are self-similar in n).
 
-Exact slip (Pollard & Segall 1987, eq. 8.34; the Griffith crack's opening with the shear stress drop in place of
-the tension): a cohesionless crack with friction coefficient f under remote normal compression sigma_n and shear
-tau > f sigma_n slips over its whole length, the shear traction on it f sigma_n, and
+Exact slip (the Griffith crack's opening with the shear stress drop in place of the tension, e.g. Pollard & Segall
+1987, "Theoretical displacements and stresses near fractures in rock"): a cohesionless crack with friction
+coefficient f under remote normal compression sigma_n and shear tau > f sigma_n slips over its whole length, the
+shear traction on it f sigma_n, and
     s(x) = 4 (1 - nu^2) / E * (tau - f sigma_n) * sqrt(a^2 - x^2)      (plane strain).
 The normal traction stays sigma_n (shear slip on a straight crack in a homogeneous body does not change it).
 
@@ -152,7 +153,8 @@ def face_mean_exact(tri_x, a, young, nu, stress_drop, order=40):
 def slip_errors(tri_x, slip, a, young, nu, stress_drop):
     """Errors of face-wise slips ``slip`` (the x component of the jump, averaged over each crack triangle with
     corners ``tri_x``) against the exact face averages: the area-weighted L2 error relative to the exact slip's
-    L2 norm over the crack, and the largest face error relative to the largest slip s(0)."""
+    L2 norm over the crack, the largest face error relative to the largest slip s(0), the error of the largest face
+    slip against s(0) and that of the potency (the slip's integral over the crack)."""
     tri_x = np.asarray(tri_x, dtype=float)
     area = 0.5 * np.linalg.norm(np.cross(tri_x[:, 1] - tri_x[:, 0], tri_x[:, 2] - tri_x[:, 0]), axis=1)
     exact = face_mean_exact(tri_x, a, young, nu, stress_drop)
@@ -161,7 +163,8 @@ def slip_errors(tri_x, slip, a, young, nu, stress_drop):
     return {"s0": s0, "faces": int(len(tri_x)), "crack_area": float(area.sum()),
             "l2_error": float(np.sqrt(np.sum(area * err ** 2) / np.sum(area * exact ** 2))),
             "max_error": float(np.max(np.abs(err)) / s0),
-            "max_slip_error": float(np.max(slip) / s0 - 1.0)}
+            "max_slip_error": float(np.max(slip) / s0 - 1.0),
+            "potency_error": float(np.sum(area * slip) / np.sum(area * exact) - 1.0)}
 
 
 def read_pfault_slip(outdir):
