@@ -3,13 +3,15 @@
 # (system site packages) holding pfault (editable) and what it takes from PyPI: gmsh, meshio, scipy (spatial
 # fields, least squares of python -m pfault.calibrate), pytest, matplotlib (figures), flopy (MODFLOW head and grid
 # files), h5netcdf (the InSAR raster, NetCDF-4 through h5py), netCDF4 (the tests read the raster back with the
-# netCDF library) and pyemu (the tests read the calibration's PEST++ files back).
+# netCDF library) and pyemu (the tests read the calibration's PEST++ files back). Optional: PFAULT_GETFEM=1 also
+# installs Debian's python3-getfem, the peer code of benchmarks/frictional_crack.py (the venv sees it).
 # Seconds when ready.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 PKGS="python3-petsc4py-real python3-petsc4py python3-mpi4py python3-h5py-mpi petsc-dev python3-venv libopenblas0-pthread"
+if [ "${PFAULT_GETFEM:-0}" = "1" ]; then PKGS="$PKGS python3-getfem"; fi
 missing=""
 for p in $PKGS; do
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then missing="$missing $p"; fi
