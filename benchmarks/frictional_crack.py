@@ -3,7 +3,8 @@
 P1 Alart-Curnier contact on the same meshes.
 
     .venv/bin/python benchmarks/frictional_crack.py [--levels 4 8 16 32] [--L 10] [--ranks 1]
-                                                    [--no-getfem] [--out runs/frictional_crack]
+                                                    [--no-getfem | --getfem nodal integral-p0 integral-p1]
+                                                    [--out runs/frictional_crack]
 
 The problem is config/frictional_crack.opts: a cohesionless crack of half-length a = 1 m (friction angle 30 degrees)
 under sigma_n = 10 MPa and tau = 10 MPa, whose exact slip is s(x) = 4 (1-nu^2)/E (tau - f sigma_n) sqrt(a^2 - x^2).
@@ -18,7 +19,9 @@ once and both codes read it:
   matrices B_N, B_T are the jumps of the split vertex pairs. GetFEM's own nodal contact brick
   (``add_nodal_contact_between_nonmatching_meshes_brick``) computes B_N, B_T, the gap and alpha by projection and
   calls this same brick (its documentation); here the pairs are known, alpha = 1 (it scales the augmentation
-  r = E h only, not the solution).
+  r = E h only, not the solution). ``--getfem integral-p0 integral-p1`` adds GetFEM's integral Alart-Curnier brick
+  (``add_integral_contact_between_nonmatching_meshes_brick``, the one displacement field on both sides of the
+  crack, the contact and friction stress P0 or P1 on the lower side's faces).
   The same boundary conditions: plane-strain rollers (u_y = 0 on both faces of the slab, by multipliers), clamped
   bottom, the uniform stress's tractions on the top and the sides.
 
@@ -51,6 +54,7 @@ A, YOUNG, NU = 1.0, 10e9, 0.25
 SIGMA_N, TAU, FRICTION = 10e6, 10e6, np.tan(np.radians(30.0))
 STRESS_DROP = TAU - FRICTION * SIGMA_N
 NEWTON_RTOL = 1e-10
+GETFEM_CONTACTS = ("nodal", "integral-p0", "integral-p1")
 
 
 def run_pfault(mesh, out, ranks):
@@ -164,8 +168,46 @@ def _contact_matrices(gf, lo_d, up_d, ndof):
     return mats
 
 
-def run_getfem(mesh_path):
-    """Solve the scene with GetFEM on the mesh at ``mesh_path``; the slip errors, Newton iterations and wall."""
+def _nodal_contact(gf, md, g, lo_d, up_d, ndof):
+    """The basic contact brick on the split pairs: nodal multipliers, non-symmetric Alart-Curnier."""
+    nc = len(lo_d)
+    bn, bt = _contact_matrices(gf, lo_d, up_d, ndof)
+    md.add_variable("lambda_n", nc)
+    md.add_variable("lambda_t", 2 * nc)
+    # augmentation: a vertex's stiffness, E (here 1) times the crack's largest element size
+    h = float(np.max(np.diff(np.sort(g["points"][np.unique(g["crack_tris"]), 0]))))
+    md.add_initialized_data("r", [h])
+    md.add_initialized_data("friction", np.full(nc, FRICTION))
+    md.add_initialized_data("gap", np.zeros(nc))
+    md.add_initialized_data("alpha", np.ones(nc))
+    md.add_basic_contact_brick("u", "lambda_n", "lambda_t", "r", bn, bt, "friction", "gap", "alpha", 1)
+
+
+def _integral_contact(gf, md, g, degree):
+    """GetFEM's integral Alart-Curnier brick between the crack's two sides (one displacement field on both), its
+    multiplier (contact and friction stress) P0 or P1 on the lower side's faces."""
+    m, L = g["mesh"], g["L"]
+    eps = 1e-6 * L
+    faces = m.outer_faces_in_box([-A - eps, -2 * L, -eps], [A + eps, 2 * L, eps])
+    cv_pts, idx = m.pid_from_cvid(faces[0])
+    above = np.add.reduceat(g["pts"][cv_pts, 2], idx[:-1]) > 0.0
+    m.set_region(11, faces[:, ~above])
+    m.set_region(12, faces[:, above])
+    mfl = gf.MeshFem(m, 3)
+    if degree == 0:
+        mfl.set_classical_discontinuous_fem(0)
+    else:
+        mfl.set_classical_fem(1)
+    md.add_filtered_fem_variable("lambda_c", mfl, 11)
+    md.add_initialized_data("r", [1.0])          # E, in the units of E
+    md.add_initialized_data("friction", [FRICTION])
+    md.add_integral_contact_between_nonmatching_meshes_brick(g["mim"], "u", "u", "lambda_c", "r", "friction", 11, 12, 1)
+
+
+def run_getfem(mesh_path, contact="nodal"):
+    """Solve the scene with GetFEM on the mesh at ``mesh_path`` with its nodal Alart-Curnier contact (``contact``
+    "nodal") or its integral one with P0 or P1 multipliers ("integral-p0", "integral-p1"); the slip errors, Newton
+    iterations and wall."""
     import getfem as gf
     gf.util_trace_level(0)
     gf.util_warning_level(0)
@@ -176,6 +218,7 @@ def run_getfem(mesh_path):
     mf = gf.MeshFem(m, 3)
     mf.set_classical_fem(1)
     mim = gf.MeshIm(m, gf.Integ("IM_TETRAHEDRON(2)"))
+    g["mim"] = mim
     node_dof = _node_dofs(mf, m, len(pts))
     ndof = mf.nbdof()
 
@@ -199,18 +242,11 @@ def run_getfem(mesh_path):
     md.add_source_term_brick(mim, "u", f"[{sxx!r}, 0, {tau!r}]", rid["xmax"])
     md.add_source_term_brick(mim, "u", f"[{-sxx!r}, 0, {-tau!r}]", rid["xmin"])
 
-    nc = len(pairs)
     lo_d, up_d = node_dof[pairs[:, 0]], node_dof[pairs[:, 1]]
-    bn, bt = _contact_matrices(gf, lo_d, up_d, ndof)
-    md.add_variable("lambda_n", nc)
-    md.add_variable("lambda_t", 2 * nc)
-    # augmentation: a vertex's stiffness, E (here 1) times the crack's largest element size
-    h = float(np.max(np.diff(np.sort(g["points"][np.unique(g["crack_tris"]), 0]))))
-    md.add_initialized_data("r", [h])
-    md.add_initialized_data("friction", np.full(nc, FRICTION))
-    md.add_initialized_data("gap", np.zeros(nc))
-    md.add_initialized_data("alpha", np.ones(nc))
-    md.add_basic_contact_brick("u", "lambda_n", "lambda_t", "r", bn, bt, "friction", "gap", "alpha", 1)
+    if contact == "nodal":
+        _nodal_contact(gf, md, g, lo_d, up_d, ndof)
+    else:
+        _integral_contact(gf, md, g, 0 if contact == "integral-p0" else 1)
     # GetFEM's Newton stops when its scaled residual (0.94 at the first iterate here) is below NEWTON_RTOL;
     # round-off leaves 3e-13 to 1e-11 on these meshes. MUMPS: the "superlu" linear solver of Debian's GetFEM 5.4.2
     # ends in a segmentation fault on this model
@@ -218,10 +254,10 @@ def run_getfem(mesh_path):
     wall = time.perf_counter() - t0
     if not converged:
         raise RuntimeError(f"GetFEM's Newton did not converge in {nit} iterations on {mesh_path}")
-    return _getfem_errors(md, g, lo_d, up_d, nit, wall)
+    return _getfem_errors(md, g, lo_d, up_d, nit, wall, contact == "nodal")
 
 
-def _getfem_errors(md, g, lo_d, up_d, nit, wall):
+def _getfem_errors(md, g, lo_d, up_d, nit, wall, nodal):
     """Slip errors of the face averages of the P1 jump, and the contact's checks."""
     u = md.variable("u")
     jump = u[up_d] - u[lo_d]                              # (pairs, 3)
@@ -230,10 +266,11 @@ def _getfem_errors(md, g, lo_d, up_d, nit, wall):
     face_slip = node_jump[g["crack_tris"], 0].mean(axis=1)
     face_slip *= np.sign(np.sum(face_slip))
     e = slip_errors(g["points"][g["crack_tris"]], face_slip, A, YOUNG, NU, STRESS_DROP)
-    ln, lt = md.variable("lambda_n"), md.variable("lambda_t").reshape(-1, 2)
     e.update(newton=int(nit), wall_s=wall, pairs=len(jump), largest_opening=float(np.abs(jump[:, 2]).max()),
-             stuck_pairs=int(np.sum(np.abs(jump[:, 0]) < 1e-9 * e["s0"])),
-             friction_ratio=float(np.max(np.linalg.norm(lt, axis=1) / np.abs(ln))))
+             stuck_pairs=int(np.sum(np.abs(jump[:, 0]) < 1e-9 * e["s0"])))
+    if nodal:
+        ln, lt = md.variable("lambda_n"), md.variable("lambda_t").reshape(-1, 2)
+        e["friction_ratio"] = float(np.max(np.linalg.norm(lt, axis=1) / np.abs(ln)))
     return e
 
 
@@ -243,6 +280,8 @@ def main(argv=None):
     p.add_argument("--L", type=float, default=10.0, help="half-side of the section (m)")
     p.add_argument("--ranks", type=int, default=1, help="pfault's MPI ranks")
     p.add_argument("--no-getfem", action="store_true", help="pfault only")
+    p.add_argument("--getfem", nargs="+", choices=GETFEM_CONTACTS, default=["nodal"],
+                   help="GetFEM's contact bricks to run (default: nodal)")
     p.add_argument("--out", default=os.path.join(REPO, "runs", "frictional_crack"))
     args = p.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
@@ -252,12 +291,12 @@ def main(argv=None):
         except ImportError as exc:
             sys.exit(f"frictional_crack.py: GetFEM cannot be imported ({exc}): install Debian's python3-getfem "
                      "(the venv sees the system's packages), or run with --no-getfem")
-    codes = ["pfault"] + ([] if args.no_getfem else ["getfem"])
+    codes = ["pfault"] + ([] if args.no_getfem else [f"getfem-{c}" for c in args.getfem])
     rows = {c: [] for c in codes}
     s0 = 4 * (1 - NU ** 2) / YOUNG * STRESS_DROP * A
     print(f"frictional crack a = {A:g} m, L = {args.L:g} m, s(0) = {1e3 * s0:.4f} mm; pfault on {args.ranks} "
           "rank(s): slip errors of the crack faces against the face averages of s(x)")
-    print(f"{'code':>7} {'n':>3} {'h':>7} {'tets':>7} {'faces':>5} {'L2 err':>7} {'max err':>7} {'rate L2':>7} "
+    print(f"{'code':>18} {'n':>3} {'h':>7} {'tets':>7} {'faces':>5} {'L2 err':>7} {'max err':>7} {'rate L2':>7} "
           f"{'rate max':>8} {'potency':>8} {'newton':>6} {'wall s':>7}")
     for n in args.levels:
         mesh = make_crack_mesh(os.path.join(args.out, f"crack{n}.msh"), A, args.L, n)
@@ -265,7 +304,7 @@ def main(argv=None):
             if code == "pfault":
                 e = run_pfault(mesh["path"], os.path.join(args.out, f"n{n}_r{args.ranks}"), args.ranks)
             else:
-                e = run_getfem(mesh["path"])
+                e = run_getfem(mesh["path"], code[len("getfem-"):])
             e.update(n=n, h=mesh["h"], tets=mesh["tets"])
             rate = ["", ""]
             if rows[code]:
@@ -275,7 +314,7 @@ def main(argv=None):
                 e["rate_max"] = float(np.log(prev["max_error"] / e["max_error"]) / dh)
                 rate = [f"{e['rate_l2']:.2f}", f"{e['rate_max']:.2f}"]
             rows[code].append(e)
-            print(f"{code:>7} {n:>3} {e['h']:>7.4f} {e['tets']:>7} {e['faces']:>5} {100 * e['l2_error']:>6.2f}% "
+            print(f"{code:>18} {n:>3} {e['h']:>7.4f} {e['tets']:>7} {e['faces']:>5} {100 * e['l2_error']:>6.2f}% "
                   f"{100 * e['max_error']:>6.2f}% {rate[0]:>7} {rate[1]:>8} {100 * e['potency_error']:>+7.2f}% "
                   f"{e['newton']!s:>6} {e['wall_s']:>7.2f}",
                   flush=True)
