@@ -281,8 +281,8 @@ def read_attrs(run_dir: str) -> dict[str, Any]:
     same = FAULTS_SINCE <= fmt <= FORMAT or (NO_FAULT_SINCE <= fmt < FORMAT and not attrs.get("fault_faces"))
     if not same:
         raise InputError(f"-pfault_restart {run_dir}: its {NAME} has format {attrs.get('format')}, written by "
-                         f"another version of pfault; this one reads format {FORMAT} (continue that run with the "
-                         "pfault that wrote it, or run it again)")
+                         f"another version of pfault; this one reads formats {FAULTS_SINCE} to {FORMAT} (continue that "
+                         "run with the pfault that wrote it, or run it again)")
     return attrs
 
 
