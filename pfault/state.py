@@ -5,8 +5,8 @@ solution (displacements and fault multipliers), the initial state it is measured
 before it (the predictor's history), the time, the geostatic initial stress, and the histories of the parts
 that have one (each fault face's initial traction, pore pressure and start of step: ``faults``; whether each
 fault face has slid: ``fault_slid``; which faces of candidate surfaces have broken, and when: ``fault_broken``,
-``fault_break_time``; the flow model's head: the pore-pressure source's ``checkpoint()``). The checkpoint (pfault.io.checkpoint) writes it and
-a restart reads it; the time loop hands it to the observers read-only.
+``fault_break_time``; the flow model's head: the pore-pressure source's ``checkpoint()``). The checkpoint
+(pfault.io.checkpoint) writes it and a restart reads it; the time loop hands it to the observers read-only.
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ What a run carries from one step to the next (pfault.state.State: its own vector
 and the flow model's): the solution u, the initial state u_ref, the initial stress sigma0, each fault face's
 initial traction ``t0``, its traction (a penalty face's shear depends on its history) and the pore pressure
 alpha p its contact law saw in the step (``pn``, which the next step's ``begin_step`` measures the faces' start
-state under), whether each face has slid, whether it has broken and when, and the flow model's head, time and records. The
-faces' stick/slip/open states are not state: the semismooth law reads them from u. The Jacobian and its
+state under), whether each face has slid, whether it has broken and when, and the flow model's head, time and
+records. The faces' stick/slip/open states are not state: the semismooth law reads them from u. The Jacobian and its
 factorisation are rebuilt at the first solve from the same values.
 
 Contents (datasets; attributes on the root)
@@ -47,8 +47,8 @@ Contents (datasets; attributes on the root)
 
 Format 6. Format 5 (without ``faults/broken`` and ``faults/break_time``) is read with every face broken, without
 a time: the faults of the pfault that wrote it were all pre-existing. Format 4 (without ``faults/slid``) is read
-for a scene without faults and refused with faults; format 3 (without ``faults/traction`` and ``steps``), 2 (multipliers per serial cell: ``u/cell_ids``,
-``u/cell``) and 1 are refused.
+for a scene without faults and refused with faults; format 3 (without ``faults/traction`` and ``steps``), 2
+(multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and 1 are refused.
 """
 
 from __future__ import annotations

@@ -107,12 +107,16 @@ def test_a_fault_that_sticks_reports_no_opening_and_no_slip(runs, ranks):
     n = s["mesh"]["fault_faces"]
     step = s["steps"][-1]
     assert (step["stick"], step["slip"], step["open"]) == (n, 0, 0)
+    # a pre-existing fault: every face broken from the start (the 1 m x 1 m plane, its trace 1 m), none in the run
+    broken = {"faces_broken": n, "broken_area_m2": pytest.approx(1.0, rel=1e-12),
+              "broken_depth_m": pytest.approx(1.0, rel=1e-12), "broken_length_m": pytest.approx(1.0, rel=1e-12),
+              "first_break_time_s": None}
     assert step["faults"] == {"fault": {"faces_stuck": n, "faces_slipping": 0, "faces_open": 0,
-                                        "max_opening_m": 0.0, "max_slip_m": 0.0}}
+                                        "max_opening_m": 0.0, "max_slip_m": 0.0, **broken}}
     assert step["max_fault_opening_m"] == 0.0 and step["max_fault_slip_m"] == 0.0
     assert s["max_fault_opening_m"] == 0.0 and s["max_fault_slip_m"] == 0.0
     assert s["faults"] == {"fault": {"faces": n, "max_opening_m": 0.0, "max_slip_m": 0.0, "faces_stuck": n,
-                                     "faces_slipping": 0, "faces_open": 0}}
+                                     "faces_slipping": 0, "faces_open": 0, **broken}}
     assert np.all(f["state"] == 0) and not np.any(f["slid"])
     assert np.max(np.abs(f["opening"])) < 1e-9 and np.max(f["slip_magnitude"]) < 1e-9
 
