@@ -2,7 +2,8 @@
 
 An observer has ``step_started(step, t)`` (before the step is solved) and ``step_done(result)`` (a
 ``StepResult``, once it is solved and measured); each reads the result, none changes the state or the step's
-record. The output observers may derive figures from a step (the land surface's hazard maxima) into
+record. A step on a fault with candidate surfaces ends once no intact face exceeds its strength
+(``resolve_breaks``). The output observers may derive figures from a step (the land surface's hazard maxima) into
 ``result.derived``, which the observers after them (checkpoint, summary) carry with the record.
 """
 
@@ -17,6 +18,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .effects import logged
+from .faults.breaking import exceeding
 from .faults.contact import OPEN, SLIP, STICK
 from .interrupt import StopRequest
 
@@ -53,13 +55,42 @@ def surface_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
     return mpi.allreduce(sub, op=MPI.MAX), mpi.allreduce(hor, op=MPI.MAX)
 
 
-def fault_figures(model: Any, states: np.ndarray, slid: np.ndarray, u_rel: np.ndarray) -> dict:
+def broken_figures(model: Any, broken: np.ndarray, break_time: np.ndarray) -> np.ndarray:
+    """Per fault (rows in the order of the scene's faults): faces broken, their area (m^2), the depth of the
+    deepest broken point below the land surface (m: below its highest point; the built-in scenes' land surfaces
+    are flat), the length of the broken part's trace on the land surface (m: the broken faces' edges whose two
+    vertices are on it) and the first break time (s, NaN if none broke in the run). Collective."""
+    faces, mesh = model.faults.faces, model.mesh
+    mpi = model.comm.tompi4py()
+    ground = mesh.vert_data[:, 1] == 1
+    top = mpi.allreduce(float(np.max(mesh.coords[ground, 2], initial=-np.inf)), op=MPI.MAX)
+    nfaults = len(model.scene.fault_settings)
+    xyz = mesh.coords[faces.verts]                                     # (nf, 3 vertices, 3)
+    depth = np.where(broken, top - xyz[:, :, 2].min(axis=1), 0.0) if np.isfinite(top) else np.zeros(len(broken))
+    on = ground[faces.verts]
+    edges = [(0, 1), (1, 2), (2, 0)]
+    trace = sum(np.where(on[:, a] & on[:, b], np.linalg.norm(xyz[:, a] - xyz[:, b], axis=1), 0.0)
+                for a, b in edges) if len(broken) else np.zeros(0)
+    sums = np.zeros((nfaults, 3))
+    np.add.at(sums, faces.fault, np.column_stack([broken, faces.area * broken, trace * broken]))
+    mx = np.full((nfaults, 2), -np.inf)
+    np.fmax.at(mx, faces.fault, np.column_stack([depth, -np.where(broken, break_time, np.nan)]))   # NaN: none
+    mpi.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+    mpi.Allreduce(MPI.IN_PLACE, mx, op=MPI.MAX)
+    first = np.where(np.isfinite(mx[:, 1]), -mx[:, 1], np.nan)
+    return np.column_stack([sums[:, 0], sums[:, 1], np.maximum(mx[:, 0], 0.0), sums[:, 2], first])
+
+
+def fault_figures(model: Any, states: np.ndarray, slid: np.ndarray, u_rel: np.ndarray,
+                  broken: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
     """Per fault (by name): how many faces are stuck, slipping and open (``states``: each owned face's, as
     reported), the largest opening of its open faces and the largest slip of its faces that have slid
     (``slid``: slipping or open at the end of a completed step, now or before), 0 where there are none; and
     the largest of these over the faults. The jumps are the face-mean jumps (with the bubbles' part) relative
     to the initial state; a closed face's opening and a stuck face's slip increment are zero to the solver's
-    tolerance, and are not counted here (fault.h5 has every face's jump)."""
+    tolerance, and are not counted here (fault.h5 has every face's jump). ``broken``: each owned face's broken flag
+    and break time, whose figures (``broken_figures``) join each fault's as ``faces_broken``, ``broken_area_m2``,
+    ``broken_depth_m``, ``broken_length_m`` and ``first_break_time_s`` (None if none broke in the run)."""
     faces = model.faults.faces
     names = [f.name for f in model.scene.fault_settings]
     gl = model.faults.relative_jumps(u_rel)[1]     # face-mean jumps with the bubbles' part
@@ -75,8 +106,42 @@ def fault_figures(model: Any, states: np.ndarray, slid: np.ndarray, u_rel: np.nd
     per = {name: {"faces_stuck": int(c[STICK]), "faces_slipping": int(c[SLIP]), "faces_open": int(c[OPEN]),
                   "max_opening_m": float(m[0]), "max_slip_m": float(m[1])}
            for name, c, m in zip(names, counts, largest)}
+    if broken is not None:
+        for (name, p), b in zip(per.items(), broken_figures(model, *broken)):
+            p.update({"faces_broken": int(b[0]), "broken_area_m2": float(b[1]), "broken_depth_m": float(b[2]),
+                      "broken_length_m": float(b[3]),
+                      "first_break_time_s": float(b[4]) if np.isfinite(b[4]) else None})
     return {"max_fault_opening_m": float(largest[:, 0].max(initial=0.0)),
             "max_fault_slip_m": float(largest[:, 1].max(initial=0.0)), "faults": per}
+
+
+def resolve_breaks(model: Any, state: Any, solver: Any, t: float, rec: dict) -> None:
+    """The fracture front of a converged step at time t: break every intact face whose traction exceeds its
+    strength (pfault.faults.breaking), solve again at the same load, and repeat until none does (a failure
+    redistributes load onto its neighbours, which may fail at the same load). Adds to the step's record the
+    passes (``breaking_passes``: solves after the first) and the faces broken in the step (``faces_broken_step``),
+    and the passes' iterations to its own. Collective; the broken set depends on each face's traction only."""
+    faults, mpi = model.faults, model.comm.tompi4py()
+    rec["breaking_passes"], rec["faces_broken_step"] = 0, 0
+    if not any(f.candidate for f in model.scene.fault_settings):
+        return
+    while rec["converged"]:
+        t_eff = faults.effective(faults.tractions(model.equations.local_array(state.u)))
+        new = exceeding(faults.strength, t_eff, state.fault_broken)
+        n = mpi.allreduce(int(np.count_nonzero(new)), op=MPI.SUM)
+        if n == 0:
+            break
+        state.break_faces(new, t)
+        rec["breaking_passes"] += 1
+        rec["faces_broken_step"] += n
+        again = solver.solve_step(t)
+        for key in ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians"):
+            rec[key] = rec.get(key, 0) + again.get(key, 0)
+        rec["residual_history"] = rec.get("residual_history", []) + again.get("residual_history", [])
+        rec["converged"], rec["reason"] = again["converged"], again["reason"]
+        rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
+        for key in ("stick", "slip", "open"):
+            rec[key] = again[key]
 
 
 def relative_displacement(model: Any, state: Any) -> np.ndarray:
@@ -105,7 +170,8 @@ def initial_state(model: Any, state: Any, solver: Any, wall: dict) -> list[dict]
         loc = model.equations.local_array(state.u)
         rec.update(model.faults.counts_by_state(loc))
         with model.faults.bubbles.unloaded():       # the initial state's own jumps: zero relative to itself
-            rec.update(fault_figures(model, model.faults.states(loc), state.fault_slid, np.zeros_like(loc)))
+            rec.update(fault_figures(model, model.faults.states(loc), state.fault_slid, np.zeros_like(loc),
+                                     (state.fault_broken, state.fault_break_time)))
     stage.pop()
     wall["solve"] += rec["wall_s"]
     return [rec]
@@ -127,6 +193,8 @@ def time_loop(model: Any, state: Any, solver: Any, observers: list, times: np.nd
             solve_stage.push()
             model.source.advance_to(t)
             rec = solver.solve_interval(times[index - 1], t, s.max_cuts)
+            if model.faults is not None:
+                resolve_breaks(model, state, solver, t, rec)
             rec.update(model.source.step_record())
             solve_stage.pop()
             rec["step"] = step
@@ -138,7 +206,8 @@ def time_loop(model: Any, state: Any, solver: Any, observers: list, times: np.nd
                 states = model.faults.states(model.equations.local_array(state.u))
                 if rec["converged"]:
                     state.fault_slid |= states != STICK
-                rec.update(fault_figures(model, states, state.fault_slid, u_rel))
+                rec.update(fault_figures(model, states, state.fault_slid, u_rel,
+                                         (state.fault_broken, state.fault_break_time)))
             records.append(rec)
             stop = request.agreed()
             due = index % s.output_every == 0 or index == len(times) - 1 or not rec["converged"] or stop is not None

@@ -292,8 +292,18 @@ def read_faults(reader: OptionReader, surface_names: Collection[str]) -> list[Fa
         c = reader.get(p + "cohesion")
         if c < 0:
             raise InputError(f"-{p}cohesion: must not be negative, got {c}")
+        strength, residual = reader.get(p + "tensile_strength"), reader.get(p + "residual_cohesion")
+        if strength < 0:
+            raise InputError(f"-{p}tensile_strength: must not be negative (0: a pre-existing fault), got {strength}")
+        if not 0.0 <= residual <= c:
+            raise InputError(f"-{p}residual_cohesion: must lie in [0, the cohesion {c:g} Pa] (-{p}cohesion), "
+                             f"got {residual}")
+        if residual > 0 and strength == 0:
+            raise InputError(f"-{p}residual_cohesion: a pre-existing fault (no -{p}tensile_strength) has only its "
+                             "cohesion; give the tensile strength of its intact surface or remove the option")
         method = reader.get(p + "method")
         faults.append(FaultSettings(name=name, cohesion=c, friction_angle=phi, method=method,
+                                    tensile_strength=strength, residual_cohesion=residual,
                                     penalty_normal=reader.get(p + "penalty_normal") if method == "penalty" else 0.0,
                                     penalty_tangential=reader.get(p + "penalty_tangential")
                                     if method == "penalty" else 0.0))

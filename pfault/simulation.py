@@ -95,7 +95,8 @@ class Simulation:
         """The observers of every step, in the order they see it: the progress line, the fields, the stations and
         the LOS raster (pfault.io.observations), the checkpoint and the summary (``records``: the run's step
         records, which the last two write)."""
-        return [ProgressLine(), FieldOutput(output), *self.observations.observers(output),
+        candidates = tuple(f.name for f in self.model.scene.fault_settings if f.candidate)
+        return [ProgressLine(candidates), FieldOutput(output), *self.observations.observers(output),
                 CheckpointObserver(output, self.state, records), SummaryObserver(output, self.composer, records)]
 
     def _open_output(self) -> None:

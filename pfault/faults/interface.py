@@ -6,12 +6,13 @@ A Lagrange face's law acts on its face-mean jump with the part of the face bubbl
 term, and a stuck face's mean jump is held at zero. The stick/slip/open state of a face is not stored: the
 semismooth law (``contact.lagrange_rows``) reads it from the iterate in every evaluation. What a step remembers
 is its start (``StepStart``: the law's jumps and the tractions of the last converged state), which the slip
-increment is measured from.
+increment is measured from. A face of a candidate surface (pfault.faults.breaking) is held in its stick branch
+while intact; which faces are broken is the run's state (pfault.state.State), given here by ``set_broken``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..effects import logged
+from . import breaking as br
 from . import contact as ct
 from .bubbles import CellBubbles
 from .faces import FaultFaces
@@ -69,8 +71,17 @@ class FaultInterface:
         nf = faces.nf
         self.t0 = np.zeros((nf, 3))         # initial (prestress) traction, local; loads nothing
         self.pn = np.zeros(nf)              # alpha p at the face: effective traction = t + (pn, 0, 0)
+        self.strength = br.face_strength(settings, faces.fault)
         self.law, self.penalty_law = self._laws(topology.young[faces.face])
+        self.intact = np.zeros(nf, dtype=bool)      # faces held stuck (intact faces of candidate surfaces)
+        self.set_broken(self.strength.initially_broken())
         self.start = StepStart(np.zeros((nf, 3)), np.zeros((nf, 3)), np.full(nf, ct.STICK))
+
+    def set_broken(self, broken: np.ndarray) -> None:
+        """The owned faces broken: the others are held stuck, a broken face's law has its broken cohesion."""
+        self.intact = ~np.asarray(broken, dtype=bool)
+        coh = self.strength.law_cohesion(~self.intact)
+        self.law, self.penalty_law = replace(self.law, cohesion=coh), replace(self.penalty_law, cohesion=coh)
 
     def _laws(self, face_young: np.ndarray) -> tuple[ct.FaceLaw, ct.FaceLaw]:
         """Per-face law parameters: the Lagrange law's augmentation E/h (E the harmonic mean of the two sides'
@@ -174,7 +185,11 @@ class FaultInterface:
         gl, t = self._law_jumps(x_loc)
         if tol > 0:
             st = ct.states(self.law, gl, self.start.g, self.effective(t), tol * fc.young)
-            return st, None, None, None
+            return np.where(self.intact, ct.STICK, st), None, None, None
+        if np.any(self.intact):
+            # intact faces glued: their stick rows whatever the iterate
+            st = ct.states(self.law, gl, self.start.g, self.effective(t)) if state is None else state
+            state = np.where(self.intact, ct.STICK, st)
         st, r, dg, dt = ct.lagrange_rows(self.law, gl, self.start.g, self.effective(t), state)
         pen = ~fc.lagrange
         if np.any(pen):

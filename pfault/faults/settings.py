@@ -14,6 +14,13 @@ class FaultSettings:
     method: str                    # lagrange | penalty
     penalty_normal: float          # Pa/m (0: automatic from the adjacent cells)
     penalty_tangential: float
+    tensile_strength: float = 0.0  # Pa: of the intact surface (0: a pre-existing fault, broken from the start)
+    residual_cohesion: float = 0.0  # Pa: of a broken face of a candidate surface
+
+    @property
+    def candidate(self) -> bool:
+        """A candidate surface: intact until its strength is exceeded (pfault.faults.breaking)."""
+        return self.tensile_strength > 0.0
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,8 @@ What a run carries from one step to the next (pfault.state.State: its own vector
 and the flow model's): the solution u, the initial state u_ref, the initial stress sigma0, each fault face's
 initial traction ``t0``, its traction (a penalty face's shear depends on its history) and the pore pressure
 alpha p its contact law saw in the step (``pn``, which the next step's ``begin_step`` measures the faces' start
-state under), whether each face has slid, and the flow model's head, time and records. The
-faces' stick/slip/open states are not state: the semismooth law reads them from u. The Jacobian and its
+state under), whether each face has slid, whether it has broken and when, and the flow model's head, time and
+records. The faces' stick/slip/open states are not state: the semismooth law reads them from u. The Jacobian and its
 factorisation are rebuilt at the first solve from the same values.
 
 Contents (datasets; attributes on the root)
@@ -35,7 +35,9 @@ Contents (datasets; attributes on the root)
   ``faults/traction`` (serial fault faces x 3, Pa, local frame): the faces' total tractions at the step's time
   (a penalty face's shear is the return map of its history, which its jump alone does not give); ``faults/slid``
   (serial fault faces, 1 or 0): whether the face has slid (slipping or open at the end of a completed step, now or
-  before), which decides whether its slip is reported
+  before), which decides whether its slip is reported; ``faults/broken`` (serial fault faces, 1 or 0) and
+  ``faults/break_time`` (serial fault faces, s, NaN while intact): which faces of candidate surfaces have broken
+  and when (pfault.faults.breaking; every face of a pre-existing fault is broken, without a time)
 - ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
   ``flow_time``
 - ``steps``: the run's step records up to the checkpoint's step (JSON as bytes), those of summary.json: a run
@@ -43,9 +45,10 @@ Contents (datasets; attributes on the root)
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``
 
-Format 5. Format 4 (without ``faults/slid``) is read for a scene without faults and refused with faults;
-format 3 (without ``faults/traction`` and ``steps``), 2 (multipliers per serial cell: ``u/cell_ids``,
-``u/cell``) and 1 are refused.
+Format 6. Format 5 (without ``faults/broken`` and ``faults/break_time``) is read with every face broken, without
+a time: the faults of the pfault that wrote it were all pre-existing. Format 4 (without ``faults/slid``) is read
+for a scene without faults and refused with faults; format 3 (without ``faults/traction`` and ``steps``), 2
+(multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and 1 are refused.
 """
 
 from __future__ import annotations
@@ -69,8 +72,10 @@ if TYPE_CHECKING:
     from ..model import Model
     from ..state import State
 
-FORMAT = 5                     # 4: no faults/slid; 3: no faults/traction; 2: multipliers per serial cell
+FORMAT = 6                     # 5: no faults/broken; 4: no faults/slid; 3: no faults/traction; 2: multipliers
+                               # per serial cell
 NO_FAULT_SINCE = 4             # a checkpoint without faults reads the same since format 4
+FAULTS_SINCE = 5               # a checkpoint with faults is read since format 5
 NAME = "checkpoint.h5"
 VERTEX, CELL, FACE = "vertex", "cell", "face"      # what a dataset's rows are
 
@@ -118,6 +123,8 @@ def local_state(model: Model, state: State, step: int, t: float, records: list[d
         data["faults/pn"] = (FACE, np.asarray(f.pn, dtype=float))
         data["faults/traction"] = (FACE, np.asarray(f.tractions(u_local), dtype=float))
         data["faults/slid"] = (FACE, state.fault_slid.astype(float))
+        data["faults/broken"] = (FACE, state.fault_broken.astype(float))
+        data["faults/break_time"] = (FACE, np.asarray(state.fault_break_time, dtype=float))
     # datasets, not attributes: a long run's records outgrow HDF5's 64 KiB attribute limit
     texts = {"steps": json.dumps(records).encode()}
     if flow is not None:
@@ -270,12 +277,12 @@ def read_attrs(run_dir: str) -> dict[str, Any]:
             attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in h5.attrs.items()}
     except OSError as exc:
         raise _not_readable(run_dir, exc) from None
-    same = attrs.get("format") == FORMAT or (NO_FAULT_SINCE <= attrs.get("format", 0) < FORMAT
-                                            and not attrs.get("fault_faces"))
+    fmt = attrs.get("format", 0)
+    same = FAULTS_SINCE <= fmt <= FORMAT or (NO_FAULT_SINCE <= fmt < FORMAT and not attrs.get("fault_faces"))
     if not same:
         raise InputError(f"-pfault_restart {run_dir}: its {NAME} has format {attrs.get('format')}, written by "
-                         f"another version of pfault; this one reads format {FORMAT} (continue that run with the "
-                         "pfault that wrote it, or run it again)")
+                         f"another version of pfault; this one reads formats {FAULTS_SINCE} to {FORMAT} (continue that "
+                         "run with the pfault that wrote it, or run it again)")
     return attrs
 
 
@@ -341,6 +348,11 @@ def restore(ckpt: dict[str, np.ndarray], attrs: dict[str, Any], model: Model, st
         f.t0 = ckpt["faults/t0"][f.faces.face].copy()
         eq.loads.set(state.time)        # the face bubbles' loads of the checkpoint's time: the faces' start reads them
         f.set_pore_pressure(ckpt["faults/pn"][f.faces.face])
+        # the broken faces before the start: an intact face's start state is stuck
+        if "faults/broken" in ckpt:
+            state.set_broken(ckpt["faults/broken"][f.faces.face] > 0.5, ckpt["faults/break_time"][f.faces.face])
+        else:               # format 5: every fault pre-existing
+            state.set_broken(np.ones(f.faces.nf, dtype=bool), np.full(f.faces.nf, np.nan))
         f.start_from(eq.local_array(state.u), ckpt["faults/traction"][f.faces.face])
         state.fault_slid = ckpt["faults/slid"][f.faces.face] > 0.5
 

@@ -26,16 +26,22 @@ def format_time(t: float) -> str:
     return f"{t:8.4g} s"
 
 
-def progress_line(step: int, rec: dict) -> str:
+def progress_line(step: int, rec: dict, candidates: tuple = ()) -> str:
     """One line per step: time, Newton and Krylov iterations, factorisations, wall time, the faces' states (and
     each fault's, when there are several), the largest subsidence, the largest opening of an open face and slip
-    of a face that has slid (pfault.run.fault_figures), and why a step failed."""
+    of a face that has slid (pfault.run.fault_figures), the broken faces of each fault of ``candidates`` (those with a
+    tensile strength) and the step's breaking passes, and why a step failed."""
     extra = ""
     if "stick" in rec:
         extra += f"  stick/slip/open {rec['stick']}/{rec['slip']}/{rec['open']}"
         if len(rec.get("faults", ())) > 1:
             extra += " (" + ", ".join(f"{name} {f['faces_stuck']}/{f['faces_slipping']}/{f['faces_open']}"
                                       for name, f in rec["faults"].items()) + ")"
+    if candidates and "faults" in rec:
+        extra += "  broken " + ", ".join(f"{name} {rec['faults'][name]['faces_broken']}" for name in candidates)
+        if rec.get("breaking_passes"):
+            n = rec["breaking_passes"]
+            extra += f" (+{rec['faces_broken_step']} in {n} pass{'es' if n > 1 else ''})"
     if "max_subsidence_m" in rec:
         extra += f"  subsidence {rec['max_subsidence_m']:.4g} m"
     if "max_fault_opening_m" in rec:
@@ -64,8 +70,13 @@ class Observer:
 
 
 class ProgressLine(Observer):
+    """The progress line of each step; ``candidates``: the names of the faults with a tensile strength."""
+
+    def __init__(self, candidates: tuple = ()) -> None:
+        self.candidates = tuple(candidates)
+
     def step_done(self, result: Any) -> None:
-        PETSc.Sys.Print(progress_line(result.step, result.record))
+        PETSc.Sys.Print(progress_line(result.step, result.record, self.candidates))
 
 
 class RunOutput:
@@ -176,7 +187,9 @@ class RunOutput:
             # is solved: its faces without that step's loads
             slid = np.zeros_like(state.fault_slid) if initial else state.fault_slid
             with m.faults.bubbles.unloaded() if initial else nullcontext():
-                faults = _fault_fields(m.faults, u_total, u_rel, slid)
+                broken = (m.faults.strength.initially_broken(), np.full(len(slid), np.nan)) if initial else \
+                    (state.fault_broken, state.fault_break_time)
+                faults = _fault_fields(m.faults, u_total, u_rel, slid, broken)
         head = m.source.vertex_head()
         return LocalStep(both, head, {"pore_pressure_change": dp, "stress": sig}, faults)
 
@@ -252,16 +265,19 @@ class RunOutput:
             self.writer.abandon()         # nothing happens to a run directory already in place
 
 
-def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray, slid: np.ndarray) -> dict:
+def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray, slid: np.ndarray,
+                  broken: tuple[np.ndarray, np.ndarray]) -> dict:
     """Per fault face this rank owns: tractions from the total state, jumps relative to the initial state (every
     face's, as computed), its state (stick 0, slip 1, open 2) and whether it has slid (slipping or open at the
-    end of a completed step, now or before: its slip is in the reported maxima)."""
+    end of a completed step, now or before: its slip is in the reported maxima), whether it is broken and when it
+    broke (``broken``: flags and times, s, NaN while intact and on a pre-existing fault)."""
     t_loc, _, t_glob, _, state = fs.face_fields(u_total)
     g, gl = fs.relative_jumps(u_rel)
     return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.faces.normal,
             "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.faces.normal,
             "slip_magnitude": np.linalg.norm(gl[:, 1:], axis=1), "state": np.asarray(state, dtype=np.int64),
-            "slid": np.asarray(slid, dtype=np.int64),
+            "slid": np.asarray(slid, dtype=np.int64), "broken": np.asarray(broken[0], dtype=np.int64),
+            "break_time": np.asarray(broken[1], dtype=float),
             "traction_normal_effective": fs.effective(t_loc)[:, 0]}
 
 

@@ -75,7 +75,8 @@ class RunSummary:
 
 def fault_summary(model: Any, steps: list) -> dict:
     """Per fault (by name): its faces, the largest opening of an open face and slip of a face that has slid
-    over the steps ``steps`` (0 where none did), and its faces stuck, slipping and open at the last of them."""
+    over the steps ``steps`` (0 where none did), and its faces stuck, slipping, open and broken at the last of them,
+    with the broken part's area, depth, trace length and first break time (pfault.run.broken_figures)."""
     names = [f.name for f in model.scene.fault_settings]
     faces = np.bincount(model.fault_id, minlength=len(names))
     out = {}
@@ -85,7 +86,10 @@ def fault_summary(model: Any, steps: list) -> dict:
         out[name] = {"faces": int(faces[k]),
                      "max_opening_m": max([p["max_opening_m"] for p in per], default=0.0),
                      "max_slip_m": max([p["max_slip_m"] for p in per], default=0.0),
-                     **{key: last.get(key, 0) for key in ("faces_stuck", "faces_slipping", "faces_open")}}
+                     **{key: last.get(key, 0) for key in ("faces_stuck", "faces_slipping", "faces_open",
+                                                          "faces_broken", "broken_area_m2", "broken_depth_m",
+                                                          "broken_length_m")},
+                     "first_break_time_s": last.get("first_break_time_s")}
     return out
 
 

@@ -256,7 +256,8 @@ class StepSolver:
             rec.update(self._fault_record(its, trial, nfact, njac))
         rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
         if rec["converged"]:
-            if start is not None:
+            if start is not None and t > state.time:
+                # (a solve again at the same time, after faces broke, keeps the predictor's history)
                 state.set_previous(state.time, start)
             state.time = float(t)
         if start is not None:

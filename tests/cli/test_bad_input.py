@@ -213,6 +213,13 @@ CASES = [
     Case("fault_scene_pulled_loose", lambda tmp, out, ranks: [
         "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_bc_xmin_type",
         "traction"], 1, "free to translate along x and to rotate about y"),
+    Case("negative_tensile_strength", lambda tmp, out, ranks: [
+        "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_fault_fault_tensile_strength",
+        "-50*kPa"], 1, "-pfault_fault_fault_tensile_strength: must not be negative (0: a pre-existing fault)"),
+    Case("residual_cohesion_above_cohesion", lambda tmp, out, ranks: [
+        "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_fault_fault_tensile_strength",
+        "50*kPa", "-pfault_fault_fault_cohesion", "20*kPa", "-pfault_fault_fault_residual_cohesion", "30*kPa"], 1,
+        "-pfault_fault_fault_residual_cohesion: must lie in [0, the cohesion 20000 Pa]"),
     # output: exit 4 (1 for an empty name), found before the first solve
     Case("output_in_proc", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", "/proc/pfault_out"], 4,
          "-pfault_output_dir /proc/pfault_out: cannot create files in '/proc'"),

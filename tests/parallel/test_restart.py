@@ -115,6 +115,28 @@ def test_restart_rejects_a_time_grid_without_the_checkpoint(tmp_path):
     assert sorted(os.listdir(part)) == before and not os.path.exists(other)
 
 
+def test_restart_reads_a_format_5_checkpoint_with_every_face_broken(tmp_path):
+    """Format 6 adds each fault face's broken flag and break time: a format-5 checkpoint (whose faults were all
+    pre-existing) continues with every face broken, without a break time: slipped as in the uninterrupted run."""
+    import h5py
+    ref, part = tmp_path / "ref", tmp_path / "part"
+    run_scene(TWO_BLOCKS, ref, extra=_steps(("-ksp_atol", "0"), 2, "1"))
+    run_scene(TWO_BLOCKS, part, extra=_steps(("-ksp_atol", "0"), 1, "0.5"))
+    with h5py.File(part / "checkpoint.h5", "r+") as h5:
+        assert h5.attrs["format"] == 6 and h5["faults/broken"][()].all()
+        assert np.isnan(h5["faults/break_time"][()]).all()
+        h5.attrs["format"] = 5
+        del h5["faults/broken"], h5["faults/break_time"]
+    _, s = run_scene(TWO_BLOCKS, part, extra=[*_steps(("-ksp_atol", "0"), 2, "1"), "-pfault_restart", str(part)])
+    assert s["converged"] and s["completed_steps"] == [1, 2]
+    f = s["faults"]["fault"]
+    assert f["faces_broken"] == f["faces"] and f["first_break_time_s"] is None
+    with open(ref / "summary.json") as fh:
+        s_ref = json.load(fh)
+    assert s_ref["max_fault_slip_m"] > 0.1
+    assert s["max_fault_slip_m"] == pytest.approx(s_ref["max_fault_slip_m"], rel=RTOL)
+
+
 def test_restart_reads_a_format_4_checkpoint_without_faults_only(tmp_path):
     """Format 5 adds each fault face's slid flag: a format-4 checkpoint of a scene without faults continues as
     before; one with faults (it has no flags) is refused in one line, before anything is written."""
@@ -129,16 +151,16 @@ def test_restart_reads_a_format_4_checkpoint_without_faults_only(tmp_path):
     faulted = tmp_path / "faulted"
     run_scene(TWO_BLOCKS, faulted, extra=_steps((), 1, "0.5"))
     with h5py.File(faulted / "checkpoint.h5", "r+") as h5:
-        assert h5.attrs["format"] == 5 and h5["faults/slid"].shape == (h5.attrs["fault_faces"],)
+        assert h5.attrs["format"] == 6 and h5["faults/slid"].shape == (h5.attrs["fault_faces"],)
         h5.attrs["format"] = 4
-        del h5["faults/slid"]
+        del h5["faults/slid"], h5["faults/broken"], h5["faults/break_time"]
     before = {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)}
     proc, _ = run_scene(TWO_BLOCKS, faulted, extra=[*_steps((), 2, "1"), "-pfault_restart", str(faulted)],
                         check=False)
     assert proc.returncode == 1, proc.stderr
     assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
         f"pfault: error: -pfault_restart {faulted}: its checkpoint.h5 has format 4, written by another version of "
-        "pfault; this one reads format 5 (continue that run with the pfault that wrote it, or run it again)"]
+        "pfault; this one reads formats 5 to 6 (continue that run with the pfault that wrote it, or run it again)"]
     assert {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)} == before
 
 
@@ -150,7 +172,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     part = tmp_path / "part"
     run_scene(opts, part, extra=_steps(extra, 2, half))
     with h5py.File(part / "checkpoint.h5", "r+") as h5:
-        assert h5.attrs["format"] == 5
+        assert h5.attrs["format"] == 6
         h5.attrs["format"] = 2
         h5["u/cell_ids"], h5["u/cell"] = np.zeros(0, np.int64), np.zeros((0, 0))
     before = {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)}
@@ -159,7 +181,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     assert proc.returncode == 1, proc.stderr
     assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
         f"pfault: error: -pfault_restart {part}: its checkpoint.h5 has format 2, written by another version of "
-        "pfault; this one reads format 5 (continue that run with the pfault that wrote it, or run it again)"]
+        "pfault; this one reads formats 5 to 6 (continue that run with the pfault that wrote it, or run it again)"]
     assert {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)} == before
 
 

@@ -13,7 +13,10 @@ Cases: Lagrange faces in the stick, slip (with a slip increment, and before any 
 semismooth law and a mix of the three (face id mod 3), placed there by the multipliers and jumps of x; penalty
 faces in the stick, slip and open branches of the return map (selected by the jump). The branch of every face is
 checked not to change between x and x + h v (the test stays away from the kinks). Then every case again with
-cohesion (prefix ``cohesive_``: the tension cut-off at c / tan(phi) on open faces). Prints one JSON line
+cohesion (prefix ``cohesive_``: the tension cut-off at c / tan(phi) on open faces). Then a candidate surface
+(pfault.faults.breaking) under the mixed case's multipliers: every face intact (``intact_mixed``: held stuck
+whatever its traction), and the faces of even serial id broken with a residual cohesion (``broken_mixed``: intact
+faces stuck beside broken ones stuck, slipping and open). Prints one JSON line
 {case: {e1, e2, order1, order2, states, ...}}.
 """
 import json
@@ -128,6 +131,28 @@ def lagrange_cases(results, prefix=""):
     sim.destroy()
 
 
+def breaking_cases(results):
+    """The mixed case's multipliers on a candidate surface: every face intact, then half of them broken."""
+    opts = PETSc.Options()
+    for key, value in (("tensile_strength", 5e4), ("residual_cohesion", 3e4)):
+        opts.setValue(f"pfault_fault_fault_{key}", value)
+    sim = Simulation(SCENE, sys.argv)
+    f = sim.model.faults
+    sim.model.equations.loads.set(1.0)
+    rng = np.random.default_rng(2468 + COMM.rank)
+    mixed_t = np.array([T_STICK, T_SLIP, (5e6, 1e5, 0.0)])[f.faces.face % 3]
+    for name, broken in (("intact_mixed", np.zeros(f.faces.nf, bool)), ("broken_mixed", f.faces.face % 2 == 0)):
+        sim.state.break_faces(broken, 0.0)
+        set_history(f, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
+        x, v = make_vectors(sim, offset=(0.0, 1e-3, 2e-3), rng=rng, t_mean=mixed_t, t_noise=2e4)
+        results[name] = taylor(sim, x, v)
+        x.destroy()
+        v.destroy()
+    sim.destroy()
+    for key in ("tensile_strength", "residual_cohesion"):
+        opts.delValue(f"pfault_fault_fault_{key}")
+
+
 def penalty_cases(results, prefix=""):
     opts = PETSc.Options()
     opts.setValue("pfault_fault_fault_method", "penalty")
@@ -161,5 +186,6 @@ if __name__ == "__main__":
     PETSc.Options().setValue("pfault_fault_fault_cohesion", COHESION)
     lagrange_cases(res, "cohesive_")
     penalty_cases(res, "cohesive_")
+    breaking_cases(res)
     if COMM.rank == 0:
         print(json.dumps(res))
