@@ -9,7 +9,8 @@ run whose faults have no strength) has no fissure figure, and its hazard map is 
 - ``fissure_break.png`` (``fissure_figure``): for each fault with broken faces, its surface in fault-plane
   coordinates coloured by the year each face broke, intact faces grey, with the fissure's depth below the land
   surface, its length along the land-surface trace, its broken area, the largest opening of its broken faces,
-  the time of the first break and the time the fissure reached the land surface;
+  the time of the first break and the time the fissure reached the land surface; below them, the fissures' depth,
+  surface length and largest opening against time (``history``);
 - on ``hazard_map.png`` (pfault.io.figures.hazard_figure, ``draw_surface_traces``): the traces on the land
   surface of the fissures that reached it: the edges of broken faces whose two vertices lie on the land surface.
 
@@ -187,9 +188,48 @@ def _fault_panel(fig: Any, ax: Any, b: Breaks, mine: np.ndarray, name: str, m: d
     ax.set_ylim(b.points[faces, ib].min(), b.points[faces, ib].max())
 
 
+def history(run_dir: str, last: int = -1) -> dict[str, dict[str, np.ndarray]]:
+    """Per fault that has broken by output time ``last``: its ``fissure_measures`` at every output time up to it
+    ({"time_s": (k,), "broken_depth_m": (k,), ...}; zero before its first break)."""
+    first = read_breaks(run_dir, 0)
+    if first is None:
+        return {}
+    names = fault_names(run_dir)
+    on_surface = on_land_surface(run_dir, first.points)
+    rows = []
+    for k in range(last % first.num_steps + 1):
+        b = first if k == 0 else read_breaks(run_dir, k)
+        rows.append((b.time, fissure_measures(b, on_surface, names)))
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for name in rows[-1][1]:
+        keys = rows[-1][1][name].keys()
+        out[name] = {"time_s": np.array([t for t, _ in rows])}
+        out[name].update({key: np.array([m[name][key] if name in m else 0.0 for _, m in rows]) for key in keys})
+    return out
+
+
+def _history_panels(fig: Any, spec: Any, hist: dict[str, dict[str, np.ndarray]]) -> None:
+    """The fissures' depth, length along the land surface and largest opening against time."""
+    panels = (("broken_depth_m", 1.0, "depth below the land surface (m)"),
+              ("broken_length_m", 1.0, "length along the land surface (m)"),
+              ("max_opening_m", 100.0, "largest opening of a broken face (cm)"))
+    grid = spec.subgridspec(1, len(panels))
+    for i, (key, scale, label) in enumerate(panels):
+        ax = fig.add_subplot(grid[0, i])
+        for name, h in hist.items():
+            ax.plot(h["time_s"] / fg.YEAR, scale * h[key], "o-", ms=3, label=name)
+        ax.set_xlabel("time (years)")
+        ax.set_title(label, fontsize=10)
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+    if len(hist) > 1:
+        ax.legend(fontsize=8)
+
+
 def fissure_figure(run_dir: str, out: str | None = None, step: int = -1) -> str | None:
     """``fissure_break.png`` at one output time: a map of each fault with broken faces, coloured by when each
-    face broke; returns its path, or None when no face is broken (or the run has no ``broken`` dataset)."""
+    face broke, and the fissures' depth, surface length and opening against time up to it; returns its path, or
+    None when no face is broken (or the run has no ``broken`` dataset)."""
     b = read_breaks(run_dir, step)
     if b is None or not b.broken.any():
         return None
@@ -197,11 +237,12 @@ def fissure_figure(run_dir: str, out: str | None = None, step: int = -1) -> str 
     names = fault_names(run_dir)
     m = measures(run_dir, b)
     ids = [int(k) for k in np.unique(b.fault[b.broken])]
-    fig, axs = plt.subplots(len(ids), 1, figsize=(11, 3.6 * len(ids) + 0.6), constrained_layout=True,
-                            squeeze=False)
-    for ax, k in zip(axs[:, 0], ids):
+    fig = plt.figure(figsize=(11, 3.6 * len(ids) + 3.4), constrained_layout=True)
+    grid = fig.add_gridspec(len(ids) + 1, 1, height_ratios=[3.6] * len(ids) + [2.8])
+    for row, k in enumerate(ids):
         name = names[k] if k < len(names) else f"fault {k}"
-        _fault_panel(fig, ax, b, b.fault == k, name, m[name])
+        _fault_panel(fig, fig.add_subplot(grid[row, 0]), b, b.fault == k, name, m[name])
+    _history_panels(fig, grid[len(ids), 0], history(run_dir, b.index))
     fig.suptitle(f"{fg._scene(run_dir)}: fissures formed (broken faces of the candidate surfaces)")
     return fg._save(fig, out or os.path.join(run_dir, FIGURE))
 

@@ -103,6 +103,12 @@ def test_fissure_history_measured_and_drawn(box_run, tmp_path):
     edges, face = fissures.surface_edges(last.faces, last.broken, on_top)
     assert len(edges) == 8 and np.all(last.broken[face])
     assert np.allclose(last.points[edges][:, :, [0, 2]], [375.0, 0.0])
+    h = fissures.history(str(run_dir))["fissure"]
+    assert np.array_equal(h["time_s"], t)
+    assert h["broken_area_m2"] == pytest.approx([0.0, 1000.0, 2000.0], rel=1e-12)
+    assert h["broken_depth_m"] == pytest.approx([0.0, 20.0, 20.0], rel=1e-12)
+    assert h["broken_length_m"] == pytest.approx([0.0, 0.0, 100.0], rel=1e-12)
+    assert list(fissures.history(str(run_dir), 1)["fissure"]["time_s"]) == t[:2]
     # the same time by its value, as the hazard map asks for it
     assert fissures.read_breaks(str(run_dir), time=t[1]).index == 1
 
