@@ -70,7 +70,8 @@ def read_breaks(run_dir: str, step: int = -1, time: float | None = None) -> Brea
             return None
         n = len(f["mesh/cells"])
         opening = g["opening"][...] if "opening" in g else np.zeros(n)
-        return Breaks(f["mesh/points"][...], f["mesh/cells"][...].astype(np.int64), g["fault"][...].astype(np.int64),
+        fault = g["fault"][...] if "fault" in g else np.zeros(n)
+        return Breaks(f["mesh/points"][...], f["mesh/cells"][...].astype(np.int64), fault.astype(np.int64),
                       g["broken"][...] != 0, g["break_time"][...].astype(float), opening, float(g.attrs["time"]),
                       step % len(groups), len(groups))
 
