@@ -18,7 +18,10 @@ writes them into any RUN_DIR (an interrupted run's too):
 - ``histories.png``: maximum subsidence, opening, slip (and drawdown) against time from summary.json, with
   the Newton iterations and factorisations per step;
 - ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.io.hazard): largest
-  horizontal principal strain and angular distortion, with the fault traces and the maxima marked;
+  horizontal principal strain and angular distortion, with the fault traces and the maxima marked, and the traces
+  of the fissures that formed and reached the land surface (pfault.io.fissures);
+- ``fissure_break.png`` (faults with a tensile strength that broke, pfault.io.fissures): each fault's broken
+  faces coloured by the year they broke, intact faces grey, with the fissure's depth, length and first break;
 - ``insar_los.png`` (``-pfault_insar_los``): the LOS raster's displacement and velocity at its last time
   (pfault.io.insar).
 
@@ -543,6 +546,8 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     marked, and the largest value of each over y against x; returns the PNG path."""
     plt = _pyplot()
     from matplotlib.tri import Triangulation
+
+    from . import fissures
     snap = read_surface(run_dir, step)
     pts, tris, cd = snap.points, snap.cells, snap.cell_data
     trace = _fault_trace(run_dir, pts[:, 2].max())
@@ -570,6 +575,7 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
                 label=f"max {val[i]:.3g} at ({centroids[i, 0]:.0f}, {centroids[i, 1]:.0f}) m")
         if key == "horizontal_strain":
             _fissure_prone_outline(ax, run_dir, pts, tris, val, snap.time, km)
+        fissures.draw_surface_traces(ax, run_dir, snap.time, km)
         ax.set_aspect("equal")
         ax.set_xlabel("x (km)")
         ax.set_ylabel("y (km)")
@@ -616,9 +622,13 @@ def _fissure_prone_outline(ax: Any, run_dir: str, pts: np.ndarray, tris: np.ndar
 
 def make_figures(run_dir: str, step: int = -1) -> list[str]:
     """All figures of a run directory; returns the paths written."""
+    from .fissures import fissure_figure
     paths = []
     if has_fault(run_dir):
         paths.append(fault_figure(run_dir, step=step))
+        broken = fissure_figure(run_dir, step=step)     # faults with a tensile strength that broke
+        if broken is not None:
+            paths.append(broken)
     paths.append(subsidence_figure(run_dir, step=step))
     paths.append(histories_figure(run_dir))
     if has_surface(run_dir):

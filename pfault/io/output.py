@@ -38,6 +38,7 @@ SERIES = ("fields", "fault", "surface")
 RUN_FILES = frozenset([f"{s}.{e}" for s in SERIES for e in ("xdmf", "h5")]
                       + ["summary.json", "options.txt", "versions.json", "materials.json", "checkpoint.h5",
                          "fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png",
+                         "fissure_break.png",
                          # observations (pfault.io.stations, pfault.io.insar)
                          "station_displacement.csv", "station_displacement.h5", "insar_los.nc", "insar_los.png"])
 TMP_SUFFIX = ".tmp"

@@ -111,6 +111,7 @@ def test_included_file_is_found_beside_the_including_file(tmp_path):
 
 
 @pytest.mark.parametrize("variant, base_scene, own_scene", [("wuxi_recovery.opts", "wuxi", "wuxi_recovery"),
+                                                             ("wuxi_fissure.opts", "wuxi", "wuxi_fissure"),
                                                              ("queretaro_calibrated.opts", "queretaro",
                                                               "queretaro_calibrated")])
 def test_shipped_variants_read_from_another_directory(tmp_path, monkeypatch, variant, base_scene, own_scene):
