@@ -50,8 +50,10 @@ class Breaks:
 
 
 def read_breaks(run_dir: str, step: int = -1, time: float | None = None) -> Breaks | None:
-    """The broken faces at output time ``step`` of fault.h5 (or, given ``time``, at the last output time not after
-    it); None when the run has no fault.h5 or that time has no ``broken`` dataset (a run written without them)."""
+    """The faces broken in the run by output time ``step`` of fault.h5 (or, given ``time``, at the last output time
+    not after it): a pre-existing fault's faces, broken from the start and without a break time, are not fissures
+    that formed. None when the run has no fault.h5 or that time has no ``broken`` dataset (a run written without
+    them)."""
     path = os.path.join(run_dir, "fault.h5")
     if not os.path.exists(path):
         return None
@@ -71,8 +73,10 @@ def read_breaks(run_dir: str, step: int = -1, time: float | None = None) -> Brea
         n = len(f["mesh/cells"])
         opening = g["opening"][...] if "opening" in g else np.zeros(n)
         fault = g["fault"][...] if "fault" in g else np.zeros(n)
+        when = g["break_time"][...].astype(float)
+        formed = (g["broken"][...] != 0) & np.isfinite(when)     # a pre-existing fault's faces have no break time
         return Breaks(f["mesh/points"][...], f["mesh/cells"][...].astype(np.int64), fault.astype(np.int64),
-                      g["broken"][...] != 0, g["break_time"][...].astype(float), opening, float(g.attrs["time"]),
+                      formed, when, opening, float(g.attrs["time"]),
                       step % len(groups), len(groups))
 
 

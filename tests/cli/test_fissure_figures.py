@@ -38,6 +38,8 @@ def _write_history(run_dir):
             for j, row in enumerate(rows[:i]):
                 broken[row], when[row] = 1, times[j + 1]
             for name, value in (("broken", broken), ("break_time", when)):
+                if name in g:
+                    del g[name]
                 g.create_dataset(name, data=value).attrs["center"] = "Cell"
             entries.append(step_entry(g))
         mesh = ((pts.shape, pts.dtype), (cells.shape, cells.dtype))
@@ -57,10 +59,12 @@ def box_run(tmp_path_factory):
 
 
 def test_a_run_without_breaking_draws_as_before(box_run):
-    """No ``broken`` dataset: no fissure figure, no trace on the hazard map, the four figures as before."""
+    """A pre-existing fault (every face broken from the start, no break time): no fissure formed, no fissure figure,
+    no trace on the hazard map, the four figures as before."""
     from pfault.io import figures as fg
     from pfault.io import fissures
-    assert fissures.read_breaks(str(box_run)) is None
+    b = fissures.read_breaks(str(box_run))
+    assert b is not None and len(b.broken) > 0 and not b.broken.any()
     assert fissures.fissure_figure(str(box_run)) is None
     paths = fg.make_figures(str(box_run))
     assert sorted(p.rsplit("/", 1)[-1] for p in paths) == sorted(fg.FIGURES)
