@@ -162,7 +162,8 @@ def nodal_jumps(fields: Snapshot, fault: Snapshot) -> tuple[np.ndarray, np.ndarr
     fields.xdmf holds the serial vertices followed by one copy per split vertex (used by the plus-side
     cells); fault.xdmf holds the serial vertices only, so copies are matched to their originals by their
     (bitwise equal) coordinates among the fault vertices. Returns (points (k, 3), jump (k, 3), normal (k, 3)),
-    with the normal averaged over the fault faces at each vertex; tips (unsplit) are left out."""
+    with the normal averaged over the fault faces at each vertex; tips (unsplit) are left out, and so are junction
+    vertices (more than one copy: faults meeting there, no one normal and plus side)."""
     n_serial = len(fault.points)
     P = fields.points
     copies = np.arange(n_serial, len(P))
@@ -174,6 +175,7 @@ def nodal_jumps(fields: Snapshot, fault: Snapshot) -> tuple[np.ndarray, np.ndarr
     first[inv[: len(cand)]] = cand
     orig = first[inv[len(cand):]]
     ok = orig >= 0
+    ok[ok] = np.bincount(orig[ok], minlength=n_serial)[orig[ok]] == 1    # junction vertices: several copies
     copies, orig = copies[ok], orig[ok]
     u = fields.point_data["displacement"]
     normals, area, _ = face_geometry(fault.points, fault.cells)
