@@ -104,7 +104,8 @@ def _read_series(path, step, cell_type):
 
 
 def read_fields(run_dir: str, step: int = -1) -> Snapshot:
-    """Mesh (split fault vertices appear twice; plus-side cells use the copies) and fields at one time:
+    """Mesh (a split fault vertex appears once per piece of its star; each cell uses its pieces' copies) and
+    fields at one time:
     point data ``displacement`` (m, relative to the initial state), ``head_change`` (m, flow scenes); cell data
     ``material``, ``pore_pressure_change`` (Pa), ``stress`` (Pa)."""
     return _read_series(os.path.join(run_dir, "fields.xdmf"), step, "tetra")
@@ -159,8 +160,8 @@ def dip_slip(slip: np.ndarray, normals: np.ndarray) -> np.ndarray:
 def nodal_jumps(fields: Snapshot, fault: Snapshot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Displacement jumps at the split fault vertices (plus copy minus original), from fields.xdmf.
 
-    fields.xdmf holds the serial vertices followed by one copy per split vertex (used by the plus-side
-    cells); fault.xdmf holds the serial vertices only, so copies are matched to their originals by their
+    fields.xdmf holds the serial vertices followed by a copy per further piece of each split vertex (the plus side
+    of a single fault); fault.xdmf holds the serial vertices only, so copies are matched to their originals by their
     (bitwise equal) coordinates among the fault vertices. Returns (points (k, 3), jump (k, 3), normal (k, 3)),
     with the normal averaged over the fault faces at each vertex; tips (unsplit) are left out, and so are junction
     vertices (more than one copy: faults meeting there, no one normal and plus side)."""
