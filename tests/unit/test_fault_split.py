@@ -361,3 +361,15 @@ def test_junction_jumps(kind):
         assert np.allclose(jump[p_in & ~m_in], d) and np.allclose(jump[m_in & ~p_in], -d)
         # every block is bounded by 2 n^2 triangles: two half planes (quadrants) or the whole of fx (T, x > 0.5)
         assert int((m_in != p_in).sum()) == 2 * n * n
+
+
+@pytest.mark.parametrize("kind", ["X", "T"])
+def test_junction_within_one_surface(kind):
+    """Both planes of the X (T) as one physical surface: its sheets meet along the junction line, 4 (3) triangles
+    an edge there, and are oriented one by one by the sign rule, so the split is the two faults' split."""
+    n = 4
+    mesh, two = junction_mesh(kind, n)
+    mesh.surfaces["net"] = np.concatenate([mesh.surfaces["fx"], mesh.surfaces["fy"]])
+    one = split_faults(mesh, ["net"])
+    assert np.array_equal(one.vert_sides, two.vert_sides) and np.array_equal(one.cell_side, two.cell_side)
+    assert np.array_equal(one.normal, two.normal) and np.all(one.fault_id == 0)
