@@ -138,9 +138,10 @@ def _gather_triangles(mesh, names):
 
 
 def _orient(points, nv, faces, fault_id, names):
-    """Flip bits that orient every edge-connected sheet of each fault consistently with the sign rule. Sheets are
-    joined across edges where exactly two triangles of the fault meet; a junction edge (three or more triangles
-    of one fault) or an edge where other faults meet too joins nothing across other faults."""
+    """Flip bits that orient every edge-connected sheet of each fault consistently with the sign rule. A sheet
+    continues across an edge where exactly two triangles of the same fault meet; where three or more of one
+    fault's triangles meet (a junction inside one surface) its sheets are oriented apart, and triangles of
+    different faults are never joined."""
     nf = len(faces)
     e0 = faces.ravel()
     e1 = faces[:, [1, 2, 0]].ravel()
