@@ -1,6 +1,7 @@
 """Named subfields on the DMPlex -> one PetscSection.
 
-Field 0 ``displacement`` lives on vertices, 3 dofs per side (split fault vertices carry two sides).
+Field 0 ``displacement`` lives on vertices, 3 dofs per side (a split fault vertex carries one side per piece of
+its star: two where a fault passes, three or more at a junction, pfault.mesh.fault).
 Field 1 ``lagrange_multiplier_fault`` (only when the scene has faults) lives on the cells that own
 fault faces, 3 dofs (normal, two tangential tractions) per fault face.
 """
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 if TYPE_CHECKING:
@@ -25,15 +27,16 @@ LAGRANGE = "lagrange_multiplier_fault"
 class DofMap:
     section: PETSc.Section
     vert_offset: np.ndarray      # (nv,) local offset of each vertex's first dof
-    vert_sides: np.ndarray       # (nv,) 1 or 2 displacement sides
+    vert_sides: np.ndarray       # (nv,) displacement sides (pieces of the star) per vertex
     cell_offset: np.ndarray      # (nc,) local offset of each cell's multiplier dofs (-1: none)
     cell_dofs: np.ndarray        # (nc, 12) local displacement dofs of each cell
     n_local: int
     fields: tuple
+    max_sides: int = 2           # the most sides of any vertex on any rank, at least 2 (output columns)
 
     def vertex_dofs(self, side: int = 0) -> np.ndarray:
-        """(nv, 3) local dofs of the given side (side 1 falls back to side 0 where not split)."""
-        base = self.vert_offset + 3 * np.where(self.vert_sides > 1, side, 0)
+        """(nv, 3) local dofs of the given side (falls back to side 0 where a vertex has fewer sides)."""
+        base = self.vert_offset + 3 * np.where(self.vert_sides > side, side, 0)
         return base[:, None] + np.arange(3)
 
 
@@ -42,7 +45,7 @@ def build(mesh: LocalMesh, vert_sides: np.ndarray | None = None, cell_side: np.n
     """Create the section and set it on the DM.
 
     vert_sides: (nv,) number of displacement sides per vertex (default 1)
-    cell_side: (nc, 4) which side (0/1) each cell uses at each of its vertices (default 0)
+    cell_side: (nc, 4) which side (0 .. vert_sides - 1) each cell uses at each of its vertices (default 0)
     cell_multipliers: (nc,) number of fault faces whose multipliers a cell carries (default none)
     """
     dm = mesh.dm
@@ -81,4 +84,5 @@ def build(mesh: LocalMesh, vert_sides: np.ndarray | None = None, cell_side: np.n
     base = vert_offset[mesh.cells] + 3 * np.where(vert_sides[mesh.cells] > 1, cell_side, 0)
     cell_dofs = (base[:, :, None] + np.arange(3)).reshape(nc, 12)
     return DofMap(section=sec, vert_offset=vert_offset, vert_sides=vert_sides, cell_offset=cell_offset,
-                  cell_dofs=cell_dofs, n_local=int(counts.sum()), fields=fields)
+                  cell_dofs=cell_dofs, n_local=int(counts.sum()), fields=fields,
+                  max_sides=max(2, dm.getComm().tompi4py().allreduce(int(vert_sides.max(initial=1)), op=MPI.MAX)))

@@ -177,7 +177,7 @@ def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
         topology = fault_topology(serial, split, cell.young_modulus)
     written = 1 + s.time_steps // s.output_every + (s.time_steps % s.output_every > 0)
     checks.check_output_space(s.output_dir, checks.output_bytes(
-        len(serial.points) + (len(split.split_vertices) if split else 0), len(serial.tets),
+        len(serial.points) + (len(split.copies[0]) if split else 0), len(serial.tets),
         len(split.faces) if split else 0, written, flow=scene.flow_settings is not None))
     return out, split, topology
 

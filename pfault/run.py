@@ -45,7 +45,7 @@ def surface_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
     mesh, dofmap = model.mesh, model.dofmap
     ground = (mesh.vert_data[:, 1] == 1) & mesh.vert_owned
     sub, hor = 0.0, 0.0
-    for side in (0, 1):
+    for side in range(dofmap.max_sides):
         sel = ground & (dofmap.vert_sides > side)
         u = u_rel[dofmap.vertex_dofs(side)[sel]]
         if len(u):

@@ -217,14 +217,28 @@ def reopening(t_open, t_closed, t_reopen, tol=0.05, closed_share=0.2):
                      f"{closed_share:.0%} of the faces still open", f"<= {tol:g}", evaluate)
 
 
-def _swap_pairs(cen, fid):
-    """Faces of fault 0 and their images under x <-> y on fault 1 (index arrays), matched by centroid."""
-    a, b = np.nonzero(fid == 0)[0], np.nonzero(fid == 1)[0]
+def _swap_pairs(cen, fid, other_cen=None, other_fid=None, first=0, second=1):
+    """Faces of fault ``first`` and their images under x <-> y on fault ``second`` (index arrays), matched by
+    centroid; the images among the faces of another run (``other_cen``, ``other_fid``) when given."""
+    other_cen = cen if other_cen is None else other_cen
+    other_fid = fid if other_fid is None else other_fid
+    a, b = np.nonzero(fid == first)[0], np.nonzero(other_fid == second)[0]
     ka = a[np.lexsort(np.round(cen[a], 6).T)]
-    kb = b[np.lexsort(np.round(cen[b][:, [1, 0, 2]], 6).T)]
-    if len(ka) != len(kb) or not np.allclose(cen[ka], cen[kb][:, [1, 0, 2]]):
+    kb = b[np.lexsort(np.round(other_cen[b][:, [1, 0, 2]], 6).T)]
+    if len(ka) != len(kb) or not np.allclose(cen[ka], other_cen[kb][:, [1, 0, 2]]):
         return None
     return ka, kb
+
+
+def _swap_difference(snap, other, pairs):
+    """Largest difference of the swapped face pairs' opening, slip and normal traction over the largest value,
+    and the number of pairs in different states."""
+    ka, kb = pairs
+    errs = []
+    for key in ("opening", "slip_magnitude", "traction_normal"):
+        v, w = snap.cell_data[key], other.cell_data[key]
+        errs.append(np.max(np.abs(v[ka] - w[kb])) / max(np.max(np.abs(v)), 1e-300))
+    return max(errs), int(np.sum(snap.cell_data["state"][ka] != other.cell_data["state"][kb]))
 
 
 def xy_symmetry(tol=1e-8):
@@ -234,15 +248,40 @@ def xy_symmetry(tol=1e-8):
         pairs = _swap_pairs(snap.points[snap.cells].mean(axis=1), snap.cell_data["fault"])
         if pairs is None:
             return Verdict(None, False, "the faults are not images of each other")
-        ka, kb = pairs
-        errs = []
-        for key in ("opening", "slip_magnitude", "traction_normal"):
-            v = snap.cell_data[key]
-            errs.append(np.max(np.abs(v[ka] - v[kb])) / max(np.max(np.abs(v)), 1e-300))
-        same = int(np.sum(snap.cell_data["state"][ka] != snap.cell_data["state"][kb]))
-        return Verdict(max(errs), max(errs) <= tol and same == 0, f"{same} face pairs in different states")
+        value, same = _swap_difference(snap, snap, pairs)
+        return Verdict(value, value <= tol and same == 0, f"{same} face pairs in different states")
     return Invariant("fault fb = fault fa with x, y swapped (opening, slip, normal traction: max difference / "
                      "max value)", f"<= {tol:g}", evaluate)
+
+
+def xy_swapped(ref, tol=1e-8):
+    """Two-faults scene with the faults' roles swapped in run ``ref`` (fa there as fb here with x, y swapped, and
+    fb as fa): each fault's fields are those of the other fault of ``ref`` with x and y swapped."""
+    def evaluate(res, runs):
+        snap, other = res.fault(), runs[ref].fault()
+        cen, fid = snap.points[snap.cells].mean(axis=1), snap.cell_data["fault"]
+        ocen, ofid = other.points[other.cells].mean(axis=1), other.cell_data["fault"]
+        value, same = 0.0, 0
+        for first, second in ((0, 1), (1, 0)):
+            pairs = _swap_pairs(cen, fid, ocen, ofid, first, second)
+            if pairs is None:
+                return Verdict(None, False, f"the faults are not the images of `{ref}`'s")
+            v, n = _swap_difference(snap, other, pairs)
+            value, same = max(value, v), same + n
+        return Verdict(value, value <= tol and same == 0, f"{same} face pairs in different states")
+    return Invariant(f"fault fa = fault fb of `{ref}` and fb = its fa, with x, y swapped (opening, slip, normal "
+                     "traction: max difference / max value)", f"<= {tol:g}", evaluate, (ref,))
+
+
+def both(first, second):
+    """Two invariants of one run: the larger of their figures, passed when both pass."""
+    def evaluate(res, runs):
+        a, b = first.evaluate(res, runs), second.evaluate(res, runs)
+        value = None if a.value is None or b.value is None else max(a.value, b.value)
+        figures = "/".join("—" if v.value is None else f"{v.value:.3g}" for v in (a, b))
+        return Verdict(value, a.ok and b.ok, "; ".join([f"each {figures}"] + [v.note for v in (a, b) if v.note]))
+    return Invariant(f"{first.what}; {second.what}", first.bound if first.bound == second.bound
+                     else f"{first.bound}; {second.bound}", evaluate, first.needs + second.needs)
 
 
 def contact_conditions(cohesion, phi, tol=1e-6):
@@ -443,13 +482,23 @@ def _mesh_cases():
                  TWO_BLOCKS, analytic_slip(exact), _opt("-pfault_box_cells", "2,16,16"))]
 
 
+CROSSING = ("-pfault_box_fault_planes", "fa:x:175:0:200:-40:0,fb:y:175:0:200:-40:0")
+T_JUNCTION = ("-pfault_box_fault_planes", "fa:x:175:0:200:-40:0,fb:y:175:0:175:-40:0")
+T_JUNCTION_SWAPPED = ("-pfault_box_fault_planes", "fa:x:175:0:175:-40:0,fb:y:175:0:200:-40:0")
+
+
 def _junction_cases():
     return [Case("two_faults_apart", "two faults ending one cell (25 m) apart at a basin corner", TWO_FAULTS,
                  xy_symmetry(), quick=True),
-            Case("two_faults_crossing", "two fault planes crossing (X junction)", TWO_FAULTS, xy_symmetry(),
-                 _opt("-pfault_box_fault_planes", "fa:x:175:0:200:-40:0,fb:y:175:0:200:-40:0"), quick=True),
-            Case("two_faults_t_junction", "one fault ending on the other (T junction)", TWO_FAULTS, converges(),
-                 _opt("-pfault_box_fault_planes", "fa:x:175:0:200:-40:0,fb:y:175:0:175:-40:0"))]
+            Case("two_faults_crossing_1_rank", "`two_faults_crossing` on 1 rank (reference)", TWO_FAULTS,
+                 converges(), CROSSING, ranks=1, quick=True),
+            Case("two_faults_crossing", "two fault planes crossing (X junction: 4 pieces at each junction vertex)",
+                 TWO_FAULTS, both(xy_symmetry(), rank_agreement("two_faults_crossing_1_rank")), CROSSING,
+                 quick=True, faces_per_rank=True),
+            Case("two_faults_t_junction_swapped", "`two_faults_t_junction` with the faults' roles swapped: fb "
+                 "through, fa ending on it (reference)", TWO_FAULTS, converges(), T_JUNCTION_SWAPPED, quick=True),
+            Case("two_faults_t_junction", "fb ending on fa (T junction: 3 pieces at each junction vertex)",
+                 TWO_FAULTS, xy_swapped("two_faults_t_junction_swapped"), T_JUNCTION, quick=True)]
 
 
 def select(all_cases, quick=False, names=None):

@@ -32,7 +32,8 @@ class FaceSides:
 
 @dataclass(frozen=True)
 class FaceDofs:
-    """Displacement dofs of the face's vertices on both sides: local ``u`` (nf, 18, minus side first) and
+    """Displacement dofs of the face's vertices on both sides, those of the piece each of its two cells uses at
+    each vertex (pfault.mesh.fault; the same dofs at a tip): local ``u`` (nf, 18, minus side first) and
     global ``g_u``, whether each is free (``u_free``: constrained dofs take no force), the jump's sign of each
     (plus - minus), and the multipliers' global dofs ``g_lm``."""
     u: np.ndarray
@@ -80,7 +81,7 @@ class FaultFaces:
         self.lagrange = np.array([s.method == "lagrange" for s in settings])[self.fault]
         self.young = young[self.cell]
         self.lm_dofs = self._multiplier_dofs(mesh, dofmap)
-        self.dofs = self._dofs(dofmap, bc_local, lgmap)
+        self.dofs = self._dofs(mesh.cells, dofmap, bc_local, lgmap)
         ids = np.concatenate(self.mpi.allgather(self.face)) if self.nf_total else np.zeros(0, np.int64)
         self.all_ids = ids.astype(np.int64)          # serial ids of all ranks' faces, in allgather order
         self.pos = np.full(self.nf_total, -1)       # owned index of each serial face (-1: another rank's)
@@ -100,11 +101,13 @@ class FaultFaces:
             slot = (at & (np.arange(4)[None, :] < self.sides.lface[:, :1])).sum(axis=1)
         return dofmap.cell_offset[self.cell][:, None] + 3 * slot[:, None] + np.arange(3)
 
-    def _dofs(self, dofmap: Any, bc_local: np.ndarray, lgmap: Any) -> FaceDofs:
+    def _dofs(self, cells: np.ndarray, dofmap: Any, bc_local: np.ndarray, lgmap: Any) -> FaceDofs:
         nf = self.nf
         cd = dofmap.cell_dofs.reshape(-1, 4, 3)
         minus = cd[self.cell[:, None], TET_FACES[self.sides.lface[:, 0]]]             # (nf,3,3)
-        plus = dofmap.vertex_dofs(1)[self.verts]                                         # (nf,3,3)
+        plus_cell = self.sides.cell[:, 1]
+        at = np.argmax(cells[plus_cell][:, None, :] == self.verts[:, :, None], axis=2)  # (nf,3) local vertex
+        plus = cd[plus_cell[:, None], at]                                               # (nf,3,3)
         u = np.concatenate([minus.reshape(nf, 9), plus.reshape(nf, 9)], axis=1)
         idx = PETSc.IntType
         g_u = lgmap.apply(u.ravel().astype(idx)).reshape(nf, 18) if nf else np.zeros((0, 18), idx)

@@ -6,9 +6,10 @@ half of each.
 
 Every array is stored by mesh entity in the serial numbering, so a checkpoint does not depend on the
 partition (a run on 2 ranks may continue on 1 or 3): per serial vertex, per serial cell or per serial fault
-face. A vector's displacement dofs are 6 columns per vertex (side 0, then the plus side of a split fault
-vertex, zero elsewhere), its fault multipliers 3 per fault face (those of the face's minus cell; zero on a
-penalty fault's face, which has none).
+face. A vector's displacement dofs are 3 columns per side of the vertex with the most sides, at least 2 (6
+columns: side 0, then the plus side of a split fault vertex; at a junction 3 more per further piece of its
+star; zero where a vertex has fewer sides), its fault multipliers 3 per fault face (those of the face's minus
+cell; zero on a penalty fault's face, which has none).
 
 On more than one rank with h5py built with MPI (pfault.io.parallel.available, the test the field output
 makes) every rank writes its rows (its owned vertices, its cells, the fault faces of its cells), moved first
@@ -25,8 +26,9 @@ records. The faces' stick/slip/open states are not state: the semismooth law rea
 factorisation are rebuilt at the first solve from the same values.
 
 Contents (datasets; attributes on the root)
-- ``u/vertex`` (serial vertices x 6), ``u/face`` (serial fault faces x 3; scenes with faults): the solution
-  (displacements and fault multipliers) at the step's time
+- ``u/vertex`` (serial vertices x 6, or 3 per side where junctions give vertices more than 2), ``u/face``
+  (serial fault faces x 3; scenes with faults): the solution (displacements and fault multipliers) at the step's
+  time
 - ``u_ref/...``: the state at t = 0 (after the geostatic initial state)
 - ``u_previous/...``, attribute ``previous_time``: the state converged before u (a fault scene's predictor
   extrapolates from it), when there is one
@@ -81,9 +83,10 @@ VERTEX, CELL, FACE = "vertex", "cell", "face"      # what a dataset's rows are
 
 
 def vertex_dofs(dofmap: DofMap) -> np.ndarray:
-    """Local dofs of each local vertex (nv, 6): side 0, then side 1 (-1 where a vertex has a single side)."""
-    sides = dofmap.vertex_dofs(0), dofmap.vertex_dofs(1)
-    return np.concatenate([sides[0], np.where((dofmap.vert_sides > 1)[:, None], sides[1], -1)], axis=1)
+    """Local dofs of each local vertex (nv, 3 * dofmap.max_sides): side 0, 1, ... (-1 where a vertex has fewer
+    sides)."""
+    return np.concatenate([np.where((dofmap.vert_sides > side)[:, None], dofmap.vertex_dofs(side), -1)
+                           for side in range(dofmap.max_sides)], axis=1)
 
 
 def _take(local, dofs):

@@ -107,7 +107,8 @@ def _read_series(path, step, cell_type):
 
 
 def read_fields(run_dir: str, step: int = -1) -> Snapshot:
-    """Mesh (split fault vertices appear twice; plus-side cells use the copies) and fields at one time:
+    """Mesh (a split fault vertex appears once per piece of its star; each cell uses its pieces' copies) and
+    fields at one time:
     point data ``displacement`` (m, relative to the initial state), ``head_change`` (m, flow scenes); cell data
     ``material``, ``pore_pressure_change`` (Pa), ``stress`` (Pa)."""
     return _read_series(os.path.join(run_dir, "fields.xdmf"), step, "tetra")
@@ -162,10 +163,11 @@ def dip_slip(slip: np.ndarray, normals: np.ndarray) -> np.ndarray:
 def nodal_jumps(fields: Snapshot, fault: Snapshot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Displacement jumps at the split fault vertices (plus copy minus original), from fields.xdmf.
 
-    fields.xdmf holds the serial vertices followed by one copy per split vertex (used by the plus-side
-    cells); fault.xdmf holds the serial vertices only, so copies are matched to their originals by their
+    fields.xdmf holds the serial vertices followed by a copy per further piece of each split vertex (the plus side
+    of a single fault); fault.xdmf holds the serial vertices only, so copies are matched to their originals by their
     (bitwise equal) coordinates among the fault vertices. Returns (points (k, 3), jump (k, 3), normal (k, 3)),
-    with the normal averaged over the fault faces at each vertex; tips (unsplit) are left out."""
+    with the normal averaged over the fault faces at each vertex; tips (unsplit) are left out, and so are junction
+    vertices (more than one copy: faults meeting there, no one normal and plus side)."""
     n_serial = len(fault.points)
     P = fields.points
     copies = np.arange(n_serial, len(P))
@@ -177,6 +179,7 @@ def nodal_jumps(fields: Snapshot, fault: Snapshot) -> tuple[np.ndarray, np.ndarr
     first[inv[: len(cand)]] = cand
     orig = first[inv[len(cand):]]
     ok = orig >= 0
+    ok[ok] = np.bincount(orig[ok], minlength=n_serial)[orig[ok]] == 1    # junction vertices: several copies
     copies, orig = copies[ok], orig[ok]
     u = fields.point_data["displacement"]
     normals, area, _ = face_geometry(fault.points, fault.cells)
@@ -312,18 +315,33 @@ def fault_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
 
 
 def _fault_trace(run_dir, ztop, rtol=1e-9):
-    """Points (k, 2) of the fault trace on the land surface, sorted along it, or None."""
+    """The fault traces on the land surface: the edges of fault triangles lying on it, as points (k, 2) of
+    segments separated by NaN rows (one line for a plot however many faults meet), or None."""
     if not has_fault(run_dir):
         return None
     snap = read_fault(run_dir, 0)
     pts = snap.points
-    used = np.unique(snap.cells)
-    p = pts[used]
-    p = p[np.abs(p[:, 2] - ztop) <= rtol * max(np.ptp(pts, axis=0).max(), 1.0)]
-    if len(p) < 2:
+    on = np.abs(pts[:, 2] - ztop) <= rtol * max(np.ptp(pts, axis=0).max(), 1.0)
+    edges = np.concatenate([snap.cells[:, [0, 1]], snap.cells[:, [1, 2]], snap.cells[:, [2, 0]]])
+    edges = np.unique(np.sort(edges[on[edges].all(axis=1)], axis=1), axis=0)
+    if not len(edges):
         return None
-    along = int(np.argmax(np.ptp(p[:, :2], axis=0)))
-    return p[np.argsort(p[:, along]), :2]
+    seg = np.concatenate([pts[edges][:, :, :2], np.full((len(edges), 1, 2), np.nan)], axis=1)
+    return seg.reshape(-1, 2)
+
+
+def _trace_x(trace, y0=None):
+    """x of the fault traces for a profile along x: where they cross y = y0, or (y0 None) those of the trace
+    segments running along y."""
+    seg = trace.reshape(-1, 3, 2)[:, :2]
+    (x0, ya), (x1, yb) = seg[:, 0].T, seg[:, 1].T
+    if y0 is None:
+        along = np.abs(yb - ya) > np.abs(x1 - x0)
+        return np.unique(np.round(np.r_[x0[along], x1[along]], 3))
+    lo, hi = np.minimum(ya, yb), np.maximum(ya, yb)
+    cross = (lo <= y0) & (y0 <= hi) & (hi > lo)
+    t = (y0 - ya[cross]) / (yb[cross] - ya[cross])
+    return np.unique(np.round(x0[cross] + t * (x1[cross] - x0[cross]), 3))
 
 
 def _layer_with_largest(points, values, rtol=1e-9):
@@ -425,7 +443,7 @@ def _profile(ax, pts, top, sub, y0, trace, wells, km):
     prof = profile_along_x(pts, top, sub, x, y0)
     ax.plot(x * km, prof, color="tab:red")
     if trace is not None:
-        for xt in np.unique(np.round(trace[:, 0], 3)):
+        for xt in _trace_x(trace, y0):
             ax.axvline(xt * km, color="k", ls="--", lw=0.8)
     if len(wells):
         for wx in wells[:, 0]:
@@ -588,7 +606,7 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
         c, v = _binned(centroids[:, 0], cd[key], nbins, "max")
         ax.plot(c * km, v, color=color, label=f"largest {key.replace('_', ' ')} over y")
     if trace is not None:
-        for xt in np.unique(np.round(trace[:, 0], 3)):
+        for xt in _trace_x(trace):
             ax.axvline(xt * km, color="k", ls="--", lw=0.8)
     ax.set_xlim(pts[:, 0].min() * km, pts[:, 0].max() * km)
     ax.set_xlabel("x (km)")

@@ -44,8 +44,8 @@ class Surface:
 
 def land_surface(points: np.ndarray, tets: np.ndarray, serial: SerialMesh, split: FaultSplit | None,
                  name: str, strain_threshold: float = 2e-4) -> Surface | None:
-    """The land surface on the output mesh (points, tets: split fault vertices appear twice, plus-side cells
-    use the copies): the triangles of the physical surface ``name``, or those on the plane z = max z when the
+    """The land surface on the output mesh (points, tets: split fault vertices appear once per piece, each cell
+    uses its pieces' copies): the triangles of the physical surface ``name``, or those on the plane z = max z when the
     mesh has no such surface; None when neither gives a triangle."""
     tri = serial.surfaces.get(name)
     if tri is not None and len(tri):

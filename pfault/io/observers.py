@@ -14,6 +14,7 @@ from petsc4py import PETSc
 
 from ..effects import logged
 from ..errors import EXIT_NOT_CONVERGED, InputError, OutputError, run_on_root
+from ..mesh.fault import copy_index
 from .summary import RunSummary
 
 
@@ -126,23 +127,23 @@ class RunOutput:
         from .steps import StepOutput
         m = self.model
         mpi = self.comm.tompi4py()
-        split = mpi.bcast(m.split.split_vertices if self.comm.rank == 0 and m.split is not None else None)
-        return StepOutput(self.comm, m.mesh, writer, np.zeros(0, np.int64) if split is None else split,
+        sides = mpi.bcast(m.split.vert_sides if self.comm.rank == 0 and m.split is not None else None)
+        return StepOutput(self.comm, m.mesh, writer, sides, m.dofmap.max_sides,
                           faces=None if m.faults is None else m.faults.faces.face,
                           fault_id=None if m.faults is None else m.fault_id,
                           surface=self.surface if self.comm.rank == 0 else None, parallel=parallel)
 
     def output_mesh(self) -> tuple[np.ndarray, np.ndarray]:
-        """Output mesh on rank 0: split fault vertices appear twice, plus-side cells use the copies."""
+        """Output mesh on rank 0: a split fault vertex appears once per piece of its star (the copies after the
+        serial vertices, pfault.mesh.fault.vertex_copies); each cell uses the copies of its pieces."""
         serial, split = self.model.serial, self.model.split
         pts, tets = serial.points, serial.tets
         if split is None:
             return pts, tets
-        sv = split.split_vertices
-        copy = np.full(len(pts), -1)
-        copy[sv] = len(pts) + np.arange(len(sv))
-        tets = np.where(split.cell_side == 1, copy[tets], tets)
-        return np.concatenate([pts, pts[sv]]), tets
+        vertex, _ = split.copies
+        piece = split.cell_side
+        copy = len(pts) + copy_index(split.vert_sides, tets, np.maximum(piece, 1))
+        return np.concatenate([pts, pts[vertex]]), np.where(piece > 0, copy, tets)
 
     def create_writer(self, output_dir: str) -> Any:
         """A RunWriter into ``output_dir`` (rank 0)."""
@@ -177,7 +178,7 @@ class RunOutput:
         from .steps import LocalStep
         m, state = self.model, self.state
         eq, dofmap = m.equations, m.dofmap
-        both = np.concatenate([u_rel[dofmap.vertex_dofs(0)], u_rel[dofmap.vertex_dofs(1)]], axis=1)
+        both = np.concatenate([u_rel[dofmap.vertex_dofs(side)] for side in range(dofmap.max_sides)], axis=1)
         u_total = eq.local_array(state.u_ref if initial else state.u)
         dp = eq.loads.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
         sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)

@@ -97,11 +97,11 @@ def locate_points(points: np.ndarray, tets: np.ndarray, xyz: np.ndarray, vert_si
 
 def _sides(tets, lam, vert_sides, cell_side, cells):
     """Per candidate cell: 0 when the point has no weight on a split fault vertex of it, else 1 (the cell uses
-    the minus-side copies of those vertices) or 2 (the plus-side ones)."""
+    the first piece's copies of those vertices) or 2 (another piece's: the plus side where one fault passes)."""
     if vert_sides is None:
         return np.zeros(len(tets), np.int64)
     split = (vert_sides[tets] > 1) & (lam > INSIDE_TOL)
-    plus = (cell_side[cells] == 1) & split
+    plus = (cell_side[cells] >= 1) & split
     return np.where(split.any(axis=1), np.where(plus.any(axis=1), 2, 1), 0)
 
 

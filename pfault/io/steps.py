@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import run_on_root
 from ..mesh import distributed
+from ..mesh.fault import copy_index, vertex_copies
 from . import hazard
 from .parallel import ParallelSeries, Rows
 
@@ -27,36 +28,42 @@ if TYPE_CHECKING:
 @dataclass
 class LocalStep:
     """One output step's values on this rank."""
-    displacement: np.ndarray        # (nv, 6) per local vertex: side 0, then the plus side of a split vertex
+    displacement: np.ndarray        # (nv, 3 * max sides) per local vertex: its sides (pieces) in order, side 0
+                                    # repeated where a vertex has fewer
     head: np.ndarray | None         # (nv,) head change (groundwater flow), or None
     cells: dict                     # per local cell: {name: (nc, ...)}
     faults: dict | None             # per fault face this rank owns (``faces`` of StepOutput): {name: (nf, ...)}
 
 
 class StepOutput:
-    """Writes output steps through ``writer`` (pfault.io.output.RunWriter, rank 0). ``split_vertices``: the
-    serial ids of the split fault vertices (sorted; the output mesh has a copy of each after the serial
-    vertices); ``faces``: the serial ids of the fault faces this rank owns and ``fault_id`` the fault of every
+    """Writes output steps through ``writer`` (pfault.io.output.RunWriter, rank 0). ``vert_sides``: the sides
+    (pieces) of every serial vertex, None without faults (the output mesh has a copy of each piece but the first
+    after the serial vertices, pfault.mesh.fault.vertex_copies); ``max_sides`` the columns of a LocalStep's
+    displacement over 3; ``faces``: the serial ids of the fault faces this rank owns and ``fault_id`` the fault of every
     face (None without faults); ``surface``: the land surface (pfault.io.hazard.Surface, rank 0; None
     elsewhere or when there is none). Every method is collective."""
 
-    def __init__(self, comm: Any, mesh: LocalMesh, writer: Any, split_vertices: np.ndarray,
+    def __init__(self, comm: Any, mesh: LocalMesh, writer: Any, vert_sides: np.ndarray | None, max_sides: int,
                  faces: np.ndarray | None = None, fault_id: np.ndarray | None = None,
                  surface: hazard.Surface | None = None, parallel: bool = False) -> None:
         self.comm, self.mpi = comm, comm.tompi4py()
         self.mesh, self.writer, self.surface = mesh, writer, surface
-        self.split_vertices, self.faces = np.asarray(split_vertices, dtype=np.int64), faces
+        n = mesh.n_global_vertices
+        self.vert_sides = np.ones(n, np.int64) if vert_sides is None else np.asarray(vert_sides, dtype=np.int64)
+        self.copies, self.faces = vertex_copies(self.vert_sides), faces
         self.parallel = bool(parallel)
         self.n_faces = 0 if fault_id is None else len(fault_id)
         self.series = {}
         if not parallel:
             return
-        n, nv = mesh.n_global_vertices, len(mesh.vert_serial)
+        nv = len(mesh.vert_serial)
         own = np.flatnonzero(mesh.vert_owned)
-        plus = own[mesh.vert_sides[own] > 1]
-        self.vertices = Rows(np.concatenate([mesh.vert_serial[own],
-                                             n + np.searchsorted(split_vertices, mesh.vert_serial[plus])]),
-                             n + len(split_vertices), np.concatenate([own, nv + plus]))
+        rows, take = [mesh.vert_serial[own]], [own]
+        for piece in range(1, max_sides):
+            at = own[mesh.vert_sides[own] > piece]
+            rows.append(n + copy_index(self.vert_sides, mesh.vert_serial[at], piece))
+            take.append(piece * nv + at)
+        self.vertices = Rows(np.concatenate(rows), n + len(self.copies[0]), np.concatenate(take))
         self.cells = Rows(mesh.cell_serial, mesh.n_global_cells)
         rows = {"fields": {"Node": self.vertices, "Cell": self.cells}}
         if faces is not None:
@@ -78,10 +85,10 @@ class StepOutput:
         return self.mpi.bcast(write(step, t, values), root=0)
 
     def _write_parallel(self, step, t, values):
-        disp = np.concatenate([values.displacement[:, :3], values.displacement[:, 3:]])
+        disp = values.displacement.reshape(len(values.displacement), -1, 3).transpose(1, 0, 2).reshape(-1, 3)
         point = {"displacement": disp}
         if values.head is not None:
-            point["head_change"] = np.concatenate([values.head, values.head])
+            point["head_change"] = np.tile(values.head, len(disp) // max(len(values.head), 1))
         cells = {"material": self.mesh.cell_material}
         cells.update(values.cells)
         entries = {"fields": self.series["fields"].write_step(step, t, point, cells)}
@@ -112,11 +119,11 @@ class StepOutput:
         faults = None if values.faults is None else self.mpi.gather((self.faces, values.faults), root=0)
 
         def write():
-            split = self.split_vertices
-            u = np.concatenate([both[:, :3], both[split, 3:]])
+            vertex, piece = self.copies
+            u = np.concatenate([both[:, :3], both.reshape(len(both), -1, 3)[vertex, piece]])
             point_data = {"displacement": u}
             if head is not None:
-                point_data["head_change"] = np.concatenate([head[:, 0], head[split, 0]])
+                point_data["head_change"] = np.concatenate([head[:, 0], head[vertex, 0]])
             cell_data, start = {}, 0
             for k, c in zip(names, columns):
                 block = stacked[:, start:start + c.shape[1]]

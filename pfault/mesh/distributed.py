@@ -29,12 +29,14 @@ if TYPE_CHECKING:
 MATERIAL = "material"                           # cells: material index
 BOUNDARY_FACE = "boundary_face"                 # cells: 4 * boundary + k, face k under the boundary's tractions
 FAULT_FACE = "fault_face"                       # cells: 4 * fault + k, face k on the fault, the cell on its minus side
-FAULT_SIDE = "fault_side"                       # cells: bit k set where the cell uses its vertex k's plus-side dofs
+FAULT_SIDE = "fault_side"                       # cells: bits 7k..7k+6 the piece of vertex k's star the cell uses
+                                                # (pfault.mesh.fault: 0 off the faults and on the minus side)
 BOUNDARY_CONSTRAINT = "boundary_constraint"     # vertices: constraint mask (bit i: displacement component i fixed;
                                                 # solver.flow.FIXED_HEAD_BIT: head fixed)
 DISPLACEMENT_BOUNDARY = "displacement_boundary"  # vertices: index of the prescribed-displacement boundary
 GROUND_SURFACE = "ground_surface"               # vertices: 1 on the ground surface
-FAULT_SPLIT = "fault_split"                     # vertices: 1 where a fault splits the vertex (plus-side dofs)
+FAULT_SPLIT = "fault_split"                     # vertices: the pieces of a split fault vertex's star, minus one
+SIDE_BITS, SIDE_MASK = 7, 127                   # fault_side: 4 x 7 bits fit a 32-bit PetscInt (pfault.mesh.fault)
 LABELS = (MATERIAL, BOUNDARY_FACE, FAULT_FACE, FAULT_SIDE, BOUNDARY_CONSTRAINT, DISPLACEMENT_BOUNDARY,
           GROUND_SURFACE, FAULT_SPLIT)
 
@@ -46,12 +48,12 @@ class LocalMesh:
     cells: np.ndarray           # (nc, 4) local vertex indices
     cell_material: np.ndarray   # (nc,) material index
     cell_face_tag: np.ndarray   # (nc, 4) boundary with tractions on local face k, -1: none
-    cell_side: np.ndarray       # (nc, 4) 1 where the cell uses the plus-side dofs of a split fault vertex
+    cell_side: np.ndarray       # (nc, 4) the piece of a split fault vertex's star the cell uses (0: the first)
     cell_fault_face: np.ndarray  # (nc, 4) serial id of the fault face on local face k when this cell is its minus
                                  # cell, else -1
     vert_constraint: np.ndarray  # (nv,) constraint mask (bit i: component i fixed)
     vert_ground: np.ndarray     # (nv,) 1 on the ground surface, else 0
-    vert_sides: np.ndarray      # (nv,) 2 at split fault vertices, else 1
+    vert_sides: np.ndarray      # (nv,) pieces of a split fault vertex's star (2, 3 or more at junctions), else 1
     vert_displacement_bc: np.ndarray  # (nv,) index of the prescribed-displacement boundary, -1: none
     cell_serial: np.ndarray     # (nc,) serial cell id
     vert_serial: np.ndarray     # (nv,) serial vertex id
@@ -204,12 +206,12 @@ def _localise(dm, migration, nc, nv, fault_keys):
         cell, k = np.nonzero(fault >= 0)
         order = np.argsort(fault_keys)
         fault_face[cell, k] = order[np.searchsorted(fault_keys[order], 4 * cell_serial[cell] + k)]
-    plus = _point_values(*cells, FAULT_SIDE, 0)
+    pieces = _point_values(*cells, FAULT_SIDE, 0)
     return LocalMesh(dm=dm, coords=dm.getCoordinatesLocal().getArray().reshape(-1, 3).copy(),
                      cells=_local_cells(dm, c_start, c_end, v_start),
                      cell_material=_point_values(*cells, MATERIAL, -1),
                      cell_face_tag=_face_values(*cells, BOUNDARY_FACE),
-                     cell_side=(plus[:, None] >> np.arange(4)) & 1, cell_fault_face=fault_face,
+                     cell_side=(pieces[:, None] >> (SIDE_BITS * np.arange(4))) & SIDE_MASK, cell_fault_face=fault_face,
                      vert_constraint=_point_values(*verts, BOUNDARY_CONSTRAINT, 0),
                      vert_ground=_point_values(*verts, GROUND_SURFACE, 0),
                      vert_sides=1 + _point_values(*verts, FAULT_SPLIT, 0),
@@ -228,9 +230,9 @@ def _serial_labels(serial, cell_face_tag, vert_constraint, vert_ground, split):
         out[BOUNDARY_FACE] = (cell, 4 * cell_face_tag[cell, k] + k)
     if split is not None:
         out[FAULT_FACE] = (split.minus_cell, 4 * split.fault_id + split.minus_lface)
-        plus = split.cell_side @ (1 << np.arange(4))
-        cell = np.flatnonzero(plus)
-        out[FAULT_SIDE] = (cell, plus[cell])
+        pieces = split.cell_side @ (1 << (SIDE_BITS * np.arange(4)))
+        cell = np.flatnonzero(pieces)
+        out[FAULT_SIDE] = (cell, pieces[cell])
     if vert_constraint is not None:
         v = np.flatnonzero(vert_constraint)
         out[BOUNDARY_CONSTRAINT] = (nc + v, vert_constraint[v])
@@ -243,7 +245,7 @@ def _serial_labels(serial, cell_face_tag, vert_constraint, vert_ground, split):
             out[DISPLACEMENT_BOUNDARY] = (nc + v, vg[v, 1])
     if split is not None:
         v = np.flatnonzero(split.vert_sides > 1)
-        out[FAULT_SPLIT] = (nc + v, np.ones(len(v), np.int64))
+        out[FAULT_SPLIT] = (nc + v, split.vert_sides[v] - 1)
     return {name: out[name] for name in LABELS if name in out and len(out[name][0])}
 
 

@@ -1,10 +1,16 @@
 """Split-node fault topology on the serial mesh (pure NumPy).
 
 A fault is a named physical surface made of interior tetrahedron faces. Each fault face gets an
-orientation (normal from the minus to the plus side) and its two tetrahedra. Every fault vertex whose
-star (the tetrahedra containing it) falls apart into two pieces once the fault faces are cut is *split*:
-it carries a second set of dofs used by the tetrahedra of the plus-side piece. A fault vertex whose star
-stays connected (the fault edge buried in the solid) is a *tip* and is not split.
+orientation (normal from the minus to the plus side) and its two tetrahedra. The star of a fault vertex (the
+tetrahedra containing it), cut along every fault face, falls into pieces; each piece has its own displacement
+dofs. Two pieces where one fault passes; three or more where faults meet: a T junction (a fault ending on
+another: its edge there is joined to the other fault, not a tip) or an X junction (faults crossing). A fault
+vertex whose star stays in one piece (the fault edge buried in the solid) is a *tip* and is not split. A fault
+face's jump at each of its vertices is u(piece of its plus cell) - u(piece of its minus cell).
+
+Piece 0 of a vertex is the piece of the minus cell of its lowest-numbered fault face; the others follow in the
+order of their smallest (cell, local vertex) of the star. Where a single fault passes, piece 0 is its minus
+side and piece 1 its plus side.
 """
 
 from __future__ import annotations
@@ -17,14 +23,16 @@ import numpy as np
 from ..errors import InputError
 from .serial import TET_FACES, SerialMesh, face_keys, locate_faces
 
-JUNCTION_FIX = "fault junctions are not supported yet; make the faults end apart or merge them into one surface"
+MAX_PIECES = 127       # pieces of one vertex's star: the fault_side label holds 7 bits per local vertex
+
 
 
 @dataclass
 class FaultSplit:
     names: list            # fault surface names in order
-    vert_sides: np.ndarray  # (nv,) int64: 2 for split fault vertices, 1 otherwise
-    cell_side: np.ndarray  # (nc,4) int64: 1 where the cell uses the plus-side dofs at that local vertex
+    vert_sides: np.ndarray  # (nv,) int64: the pieces of each vertex's star (2 where one fault passes, 3 or more
+                            # at a junction, 1 off the faults and at tips)
+    cell_side: np.ndarray  # (nc,4) int64: the piece whose dofs the cell uses at that local vertex
     faces: np.ndarray      # (nf,3) int64, (x1-x0)x(x2-x0) points from the minus to the plus side
     fault_id: np.ndarray   # (nf,) index into names
     minus_cell: np.ndarray
@@ -37,7 +45,28 @@ class FaultSplit:
 
     @property
     def split_vertices(self) -> np.ndarray:
-        return np.nonzero(self.vert_sides == 2)[0]
+        return np.nonzero(self.vert_sides > 1)[0]
+
+    @property
+    def copies(self) -> tuple[np.ndarray, np.ndarray]:
+        """The extra copies of split vertices on the output mesh: (vertex, piece) of each, see vertex_copies."""
+        return vertex_copies(self.vert_sides)
+
+
+def vertex_copies(vert_sides: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A vertex with k pieces appears k times on the output mesh: itself (piece 0), then, numbered after all
+    vertices, a copy for each of its pieces 1..k-1, by vertex and then piece. Returns the (vertex, piece) of
+    every copy in that order (the split vertices once each where no vertex has more than two pieces)."""
+    extra = np.maximum(np.asarray(vert_sides, dtype=np.int64) - 1, 0)
+    vertex = np.repeat(np.arange(len(extra)), extra)
+    start = np.cumsum(extra) - extra
+    return vertex, np.arange(len(vertex)) - start[vertex] + 1
+
+
+def copy_index(vert_sides: np.ndarray, vertex: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """Index among the copies (vertex_copies) of piece ``piece`` >= 1 of ``vertex``."""
+    extra = np.maximum(np.asarray(vert_sides, dtype=np.int64) - 1, 0)
+    return (np.cumsum(extra) - extra)[vertex] + piece - 1
 
 
 def _components(n, a, b, rel=None):
@@ -109,23 +138,21 @@ def _gather_triangles(mesh, names):
 
 
 def _orient(points, nv, faces, fault_id, names):
-    """Flip bits that orient every edge-connected fault surface consistently with the sign rule."""
+    """Flip bits that orient every edge-connected sheet of each fault consistently with the sign rule. A sheet
+    continues across an edge where exactly two triangles of the same fault meet; where three or more of one
+    fault's triangles meet (a junction inside one surface) its sheets are oriented apart, and triangles of
+    different faults are never joined."""
     nf = len(faces)
     e0 = faces.ravel()
     e1 = faces[:, [1, 2, 0]].ravel()
     tri = np.repeat(np.arange(nf), 3)
     lo, hi = np.minimum(e0, e1), np.maximum(e0, e1)
-    ekey = lo * nv + hi
+    ekey = (lo * nv + hi) * max(len(names), 1) + fault_id[tri]     # an edge of one fault
     fwd = (e0 < e1).astype(np.int64)
     order = np.argsort(ekey, kind="stable")
     sk = ekey[order]
     starts = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1]])
     counts = np.diff(np.r_[starts, len(sk)])
-    if np.any(counts > 2):
-        bad = np.repeat(counts > 2, counts)
-        raise InputError(_fault_message(names, fault_id[tri[order[bad]]],
-                                        f"{int((counts > 2).sum())} edges are shared by more than two fault "
-                                        f"triangles; {JUNCTION_FIX}"))
     pair = starts[counts == 2]
     t, u = tri[order[pair]], tri[order[pair + 1]]
     rel = (fwd[order[pair]] == fwd[order[pair + 1]]).astype(np.int64)   # same direction: one must flip
@@ -190,50 +217,37 @@ def _star_components(T, nv, is_fv, fkeys):
     return label
 
 
-def _sides(T, nv, is_fv, label, minus, plus, fault_id, names):
-    """Which fault vertices split (two star components, the minus cells all in one of them) and which star nodes
-    use the plus side: (vert_sides (nv,), the plus-side star nodes 4*s + k)."""
+def _pieces(T, nv, is_fv, label, minus):
+    """The pieces of each fault vertex's star (``label``: the star nodes' components) and the piece of each star
+    node at a fault vertex: (vert_sides (nv,), the star nodes 4*s + k at fault vertices, their pieces). Piece 0
+    is the piece of the minus cell of the vertex's lowest-numbered face, the others in the order of their
+    components' labels (the smallest star node of each)."""
     ns = len(T)
     node_v = T.ravel()
     inc = np.flatnonzero(is_fv[node_v])                  # (vertex, cell) incidences at fault vertices
-    iv, il = node_v[inc], label[inc]
-    pairs = np.unique(iv * (4 * ns) + il)
-    ncomp = np.bincount(pairs // (4 * ns), minlength=nv)
-
-    # the component of the minus (plus) cells at each vertex
-    big = np.iinfo(np.int64).max
-    (mc, ml), (pc, pl) = minus, plus
-    mnode = (4 * mc[:, None] + TET_FACES[ml]).ravel()
-    pnode = (4 * pc[:, None] + TET_FACES[pl]).ravel()
-    mv, pv = node_v[mnode], node_v[pnode]
-    mlab_lo = np.full(nv, big)
-    mlab_hi = np.full(nv, -1)
-    _reduce(np.minimum, mlab_lo, mv, label[mnode])
-    _reduce(np.maximum, mlab_hi, mv, label[mnode])
-    tri_of = np.repeat(np.arange(len(mc)), 3)
-
-    many = ncomp > 2
-    if np.any(many):
-        bad = many[mv]
-        raise InputError(_fault_message(names, fault_id[tri_of[bad]], f"{int(many.sum())} vertices where fault "
-                                        f"surfaces meet or touch (junction); {JUNCTION_FIX}"))
-    split = ncomp == 2
-    mixed = split & (mlab_lo != mlab_hi)
-    plus_same = np.zeros(nv, bool)
-    plus_same[pv[label[pnode] == mlab_lo[pv]]] = True
-    mixed |= split & plus_same
-    if np.any(mixed):
-        bad = mixed[mv]
-        raise InputError(_fault_message(names, fault_id[tri_of[bad]], f"{int(mixed.sum())} vertices where the "
-                                        f"two sides of the fault cannot be told apart (surfaces touching); "
-                                        f"{JUNCTION_FIX}"))
-    vert_sides = np.ones(nv, np.int64)
-    vert_sides[split] = 2
-    return vert_sides, inc[split[iv] & (il != mlab_lo[iv])]
+    iv = node_v[inc]
+    keys, at = np.unique(iv * (4 * ns) + label[inc], return_inverse=True)   # one per piece, by vertex then label
+    kv = keys // (4 * ns)
+    nk = np.bincount(kv, minlength=nv)
+    rank = np.arange(len(keys)) - (np.cumsum(nk) - nk)[kv]       # the piece's place among its vertex's pieces
+    mc, ml = minus
+    mnode = (4 * mc[:, None] + TET_FACES[ml]).ravel()    # corners of the faces in face order
+    mv = node_v[mnode]
+    v0, first = np.unique(mv, return_index=True)         # each fault vertex's lowest-numbered face
+    zero = np.zeros(nv, np.int64)
+    zero[v0] = rank[np.searchsorted(keys, v0 * (4 * ns) + label[mnode[first]])]
+    z = zero[kv]
+    piece = np.where(rank == z, 0, np.where(rank < z, rank + 1, rank))
+    vert_sides = np.maximum(nk, 1).astype(np.int64)
+    if vert_sides.max(initial=1) > MAX_PIECES:
+        raise InputError(f"{int((vert_sides > MAX_PIECES).sum())} vertices where more than {MAX_PIECES} fault "
+                         "pieces meet; coarsen the fault network there")
+    return vert_sides, inc, piece[at]
 
 
 def split_faults(mesh: SerialMesh, names: Iterable[str]) -> FaultSplit:
-    """Orient the named fault surfaces and decide which vertices split and which cells use the plus side."""
+    """Orient the named fault surfaces and cut the stars of their vertices into pieces: which vertices split,
+    into how many pieces, and which piece each cell uses at each of its vertices."""
     names = list(names)
     if not names:
         return _empty(mesh, names)
@@ -256,9 +270,9 @@ def split_faults(mesh: SerialMesh, names: Iterable[str]) -> FaultSplit:
     pc, pl = np.where(flip, c0, c1), np.where(flip, l0, l1)
 
     label = _star_components(T, nv, is_fv, fkeys)
-    vert_sides, plus = _sides(T, nv, is_fv, label, (mc, ml), (pc, pl), fault_id, names)
+    vert_sides, nodes, piece = _pieces(T, nv, is_fv, label, (mc, ml))
     cell_side = np.zeros((nc, 4), np.int64)
-    cell_side[star[plus // 4], plus % 4] = 1
+    cell_side[star[nodes // 4], nodes % 4] = piece
 
     x = points[faces]
     cross = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
@@ -268,13 +282,3 @@ def split_faults(mesh: SerialMesh, names: Iterable[str]) -> FaultSplit:
                       plus_lface=pl.astype(np.int64), normal=cross / norm[:, None], area=0.5 * norm,
                       tip_vertices=np.flatnonzero(is_fv & (vert_sides == 1)))
 
-
-def _reduce(ufunc, out, idx, val):
-    """out[idx] = ufunc(out[idx], val) with repeated indices, sort-based (numpy < 1.25 has slow ufunc.at)."""
-    if len(idx) == 0:
-        return
-    order = np.argsort(idx, kind="stable")
-    si = idx[order]
-    starts = np.flatnonzero(np.r_[True, si[1:] != si[:-1]])
-    heads = si[starts]
-    out[heads] = ufunc(out[heads], ufunc.reduceat(val[order], starts))

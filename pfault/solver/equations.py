@@ -25,7 +25,7 @@ def constrained_local(mesh: Any, dofmap: Any) -> np.ndarray:
     """Boolean mask of the local dofs fixed by Dirichlet conditions."""
     mask = mesh.vert_data[:, 0]
     loc = np.zeros(dofmap.n_local, dtype=bool)
-    for side in (0, 1):
+    for side in range(dofmap.max_sides):
         sel = dofmap.vert_sides > side
         dofs = dofmap.vertex_dofs(side)[sel]
         bits = (mask[sel, None] >> np.arange(3)) & 1

@@ -44,7 +44,7 @@ class Loads:
             if b.kind != "displacement" or not any(b.displacement):
                 continue
             loc = np.zeros(self.dofmap.n_local)
-            for side in (0, 1):
+            for side in range(self.dofmap.max_sides):
                 sel = (self.dofmap.vert_sides > side) & (which == i)
                 dofs = self.dofmap.vertex_dofs(side)[sel]
                 bits = ((mask[sel, None] >> np.arange(3)) & 1) * ((b.components >> np.arange(3)) & 1)

@@ -150,7 +150,7 @@ def rigid_body_modes(mesh: LocalMesh, dofmap: DofMap, dm: PETSc.DM) -> PETSc.Nul
             a, b = [(0, 1), (1, 2), (2, 0)][mode - 3]
             vals[:, a] = -x[:, b]
             vals[:, b] = x[:, a]
-        for side in (0, 1):
+        for side in range(dofmap.max_sides):
             sel = dofmap.vert_sides > side
             loc[dofmap.vertex_dofs(side)[sel]] = vals[sel]
         lv = dm.getLocalVec()

@@ -3,8 +3,8 @@
 A 4-step run against a 2-step run (to half the end time) continued to 4 steps, on 1 and 2 ranks, for a scene
 without faults or flow (oedometer), one with groundwater flow and no fault (a box drained by a well), one with
 faults and flow (Queretaro at size factor 6: geostatic start, wells, slipping faces), one with faults and
-no flow (Wuxi at size factor 4: geostatic start, an opening fissure) and one loaded by a MODFLOW model's heads
-(the example site: the continued run reads the heads again, between saved times). Compared: the summary maxima, and every
+no flow (Wuxi at size factor 4: geostatic start, an opening fissure), two faults crossing (an X junction: its
+checkpoint holds 4 sides a vertex) and one loaded by a MODFLOW model's heads (the example site: the continued run reads the heads again, between saved times). Compared: the summary maxima, and every
 dataset of every output step in fields.h5, fault.h5 and surface.h5 (steps 1-2 copied from the first run, 3-4
 recomputed), each relative to its largest magnitude. Observed: 1 rank, identical bit for bit (the first step
 after the restart refactors the same Jacobian); 2 ranks, ~1e-14 (Wuxi, the flow box), as two uninterrupted
@@ -41,6 +41,8 @@ SCENES = {
              "1*year"),   # slip and open faces
     "flow": (FLOW_BOX_FILE, (), "2*day", "1*day"),
     "heads": ("config/site_example/site.opts", (), "10*year", "5*year"),    # MODFLOW heads, mesh origin
+    "junction": ("config/hard/two_faults.opts", ("-pfault_box_fault_planes", "fa:x:175:0:200:-40:0,"
+                 "fb:y:175:0:200:-40:0", "-ksp_atol", "0"), "4*year", "2*year"),   # X junction: 4 sides a vertex
 }
 
 

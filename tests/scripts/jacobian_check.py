@@ -25,6 +25,13 @@ import sys
 import petsc4py
 
 SCENE = "config/two_blocks.opts"
+# --junction: the Lagrange cases on two faults crossing (an X junction: 4 pieces at each junction vertex, the
+# offset on piece 1 of every split vertex) in place of the two blocks
+JUNCTION = "--junction" in sys.argv
+if JUNCTION:
+    sys.argv.remove("--junction")
+    SCENE = "config/hard/two_faults.opts"
+    sys.argv += ["-pfault_box_fault_planes", "fa:x:175:0:200:-40:0,fb:y:175:0:200:-40:0"]
 petsc4py.init([sys.argv[0], "-options_file", SCENE] + sys.argv[1:])
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
@@ -178,7 +185,12 @@ def penalty_cases(results, prefix=""):
     opts.delValue("pfault_fault_fault_method")
 
 
-if __name__ == "__main__":
+if __name__ == "__main__" and JUNCTION:
+    res = {"ranks": COMM.size}
+    lagrange_cases(res)
+    if COMM.rank == 0:
+        print(json.dumps(res))
+elif __name__ == "__main__":
     res = {"ranks": COMM.size}
     lagrange_cases(res)
     penalty_cases(res)

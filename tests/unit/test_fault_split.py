@@ -5,7 +5,7 @@ import pytest
 
 from pfault.errors import InputError
 from pfault.mesh.box import box_mesh
-from pfault.mesh.fault import split_faults
+from pfault.mesh.fault import copy_index, split_faults, vertex_copies
 from pfault.mesh.serial import TET_FACES, boundary_faces, face_keys
 
 
@@ -40,14 +40,13 @@ def add_fault(mesh, n, axis, level, select=None, name="fault"):
 
 
 def split_mesh(mesh, fs):
-    """Tets renumbered with a second vertex id (nv + rank) for the plus side of every split vertex."""
+    """Tets renumbered with a vertex id per piece: the vertex itself for piece 0, nv + its copy's index for the
+    others (pfault.mesh.fault.vertex_copies, the output mesh's numbering)."""
     nv = len(mesh.points)
-    split = np.flatnonzero(fs.vert_sides == 2)
-    copy = np.full(nv, -1, np.int64)
-    copy[split] = nv + np.arange(len(split))
-    tets = np.where(fs.cell_side == 1, copy[mesh.tets], mesh.tets)
-    assert np.all(tets >= 0)
-    return tets, nv + len(split)
+    assert np.all(fs.cell_side < fs.vert_sides[mesh.tets])
+    copy = nv + copy_index(fs.vert_sides, mesh.tets, np.maximum(fs.cell_side, 1))
+    tets = np.where(fs.cell_side > 0, copy, mesh.tets)
+    return tets, nv + len(vertex_copies(fs.vert_sides)[0])
 
 
 def check_split_mesh(mesh, fs, opened):
@@ -223,9 +222,6 @@ def test_errors():
     with pytest.raises(InputError, match=r"fault 'nope' is not a physical surface of the mesh \(surfaces: .*top"):
         split_faults(mesh, ["nope"])
     add_fault(mesh, n, 0, 2, name="fx")
-    add_fault(mesh, n, 1, 2, name="fy")
-    with pytest.raises(InputError, match=r"faults 'fx', 'fy': .*junctions are not supported yet"):
-        split_faults(mesh, ["fx", "fy"])
     with pytest.raises(InputError, match="listed twice"):
         split_faults(mesh, ["fx", "fx"])
 
@@ -266,13 +262,114 @@ def test_bent_fault_orientation_propagates():
     check_split_mesh(mesh, fs, np.ones(len(fs.faces), bool))
 
 
-def test_fault_ending_on_another_is_a_junction():
+def test_triangles_of_two_faults_are_an_error():
     n = 4
     mesh = unit_box(n)
     add_fault(mesh, n, 0, 2, name="main")
-    add_fault(mesh, n, 1, 2, select=lambda g: g[..., 0] >= 2, name="branch")
-    with pytest.raises(InputError, match=r"faults 'main', 'branch': .*junctions are not supported yet"):
-        split_faults(mesh, ["main", "branch"])
+    mesh.surfaces["copy"] = mesh.surfaces["main"][:2]
     with pytest.raises(InputError, match=r"faults 'copy', 'main': 2 triangles belong to more than one fault"):
-        mesh.surfaces["copy"] = mesh.surfaces["main"][:2]
-        split_faults(mesh, ["copy", "main", "branch"])
+        split_faults(mesh, ["copy", "main"])
+
+
+def components(tets, nv):
+    """Connected components (through shared faces) of a tet mesh: the label of each cell."""
+    from pfault.mesh.fault import _components
+    keys = face_keys(tets[:, TET_FACES].reshape(-1, 3), nv)
+    order = np.argsort(keys, kind="stable")
+    same = np.flatnonzero(keys[order][1:] == keys[order][:-1])
+    a, b = order[same] // 4, order[same + 1] // 4
+    return _components(len(tets), np.r_[a, b], np.r_[b, a])[0]
+
+
+def piece_dofs(mesh, fs):
+    """The vertex id (split_mesh numbering) each fault face's minus and plus cell uses at the face's vertices."""
+    tets, _ = split_mesh(mesh, fs)
+    minus = tets[fs.minus_cell[:, None], TET_FACES[fs.minus_lface]]
+    at = np.argmax(mesh.tets[fs.plus_cell][:, None, :] == fs.faces[:, :, None], axis=2)
+    plus = tets[fs.plus_cell[:, None], at]
+    assert np.array_equal(mesh.tets[fs.minus_cell[:, None], TET_FACES[fs.minus_lface]], fs.faces)
+    return minus, plus
+
+
+def junction_mesh(kind, n=4):
+    """Fault 'fx' (x = 0.5, the whole box) and 'fy' (y = 0.5): the whole box (X) or x <= 0.5 only (T)."""
+    mesh = unit_box(n)
+    add_fault(mesh, n, 0, n // 2, name="fx")
+    select = None if kind == "X" else (lambda g: g[..., 0] <= n // 2)
+    add_fault(mesh, n, 1, n // 2, select=select, name="fy")
+    return mesh, split_faults(mesh, ["fx", "fy"])
+
+
+@pytest.mark.parametrize("kind, pieces, blocks", [("X", 4, 4), ("T", 3, 3)])
+def test_junction_pieces_and_dofs(kind, pieces, blocks):
+    """X: two planes crossing; T: fy ending on fx. The n + 1 vertices of the junction line split into 4 (X) or 3
+    (T) pieces, the other fault vertices into 2; no tips (the T's branch is joined to fx, not a tip). Cut along
+    every fault face the box falls into 4 (X) or 3 (T) blocks, and every fault face is open (its two cells use
+    different dofs at each vertex): the split mesh's boundary is the box's plus both sides of every face."""
+    n = 4
+    mesh, fs = junction_mesh(kind, n)
+    g = grid(mesh, n)
+    line = np.flatnonzero((g[:, 0] == n // 2) & (g[:, 1] == n // 2))
+    assert np.array_equal(np.flatnonzero(fs.vert_sides == pieces), line)
+    fv = np.unique(fs.faces)
+    assert np.all(fs.vert_sides[np.setdiff1d(fv, line)] == 2) and fs.tip_vertices.size == 0
+    assert np.all(fs.vert_sides[np.setdiff1d(np.arange(len(g)), fv)] == 1)
+    # displacement dofs: 3 per piece
+    n_fx, n_fy = (n + 1) ** 2, (n + 1) * (n + 1 if kind == "X" else n // 2 + 1)
+    assert int(fs.vert_sides.sum()) == len(g) + (n_fx + n_fy - 2 * (n + 1)) + (pieces - 1) * (n + 1)
+    check_split_mesh(mesh, fs, np.ones(len(fs.faces), bool))
+    tets, nv = split_mesh(mesh, fs)
+    label = components(tets, nv)
+    assert len(np.unique(label)) == blocks
+    # each block holds the cells of one quadrant (X) or of x > 0.5 and the two halves of x < 0.5 (T)
+    c = centroids(mesh, np.arange(len(mesh.tets)))
+    quadrant = 2 * (c[:, 0] > 0.5) + (c[:, 1] > 0.5)
+    if kind == "T":
+        quadrant = np.where(c[:, 0] > 0.5, 2, quadrant)
+    assert len(np.unique(np.c_[label, quadrant], axis=0)) == blocks
+    # the sign rule: normals +x on fx, +y on fy; the minus cell below the plane
+    assert np.allclose(fs.normal[fs.fault_id == 0], [1, 0, 0]) and np.allclose(fs.normal[fs.fault_id == 1], [0, 1, 0])
+
+
+@pytest.mark.parametrize("kind", ["X", "T"])
+def test_junction_jumps(kind):
+    """The jump of a rigid-body motion taken by every piece is zero on every face; a uniform displacement d of the
+    pieces one quadrant's cells use (X; T: the two quadrants of x < 0.5 and the half x > 0.5) opens exactly the
+    faces that bound it, by +d where it is the plus side and -d where it is the minus side, at each vertex."""
+    n = 4
+    mesh, fs = junction_mesh(kind, n)
+    tets, nv = split_mesh(mesh, fs)
+    minus, plus = piece_dofs(mesh, fs)
+    vertex = np.r_[np.arange(len(mesh.points)), vertex_copies(fs.vert_sides)[0]]
+    x = mesh.points[vertex]
+    rng = np.random.default_rng(3)
+    a, w = rng.normal(size=3), rng.normal(size=3)
+    u = a + np.cross(w, x)
+    assert np.abs(u[plus] - u[minus]).max() < 1e-14
+    c = centroids(mesh, np.arange(len(mesh.tets)))
+    d = np.array([0.3, -0.2, 0.7])
+    quadrant = 2 * (c[:, 0] > 0.5) + (c[:, 1] > 0.5)
+    if kind == "T":
+        quadrant = np.where(c[:, 0] > 0.5, 2, quadrant)     # x > 0.5 is one block: fy ends at x = 0.5
+    for q in np.unique(quadrant):
+        inside = quadrant == q
+        u = np.zeros((nv, 3))
+        u[np.unique(tets[inside])] = d
+        jump = u[plus] - u[minus]
+        m_in, p_in = inside[fs.minus_cell], inside[fs.plus_cell]
+        assert np.array_equal(np.abs(jump).max(axis=(1, 2)) > 0, m_in != p_in)
+        assert np.allclose(jump[p_in & ~m_in], d) and np.allclose(jump[m_in & ~p_in], -d)
+        # every block is bounded by 2 n^2 triangles: two half planes (quadrants) or the whole of fx (T, x > 0.5)
+        assert int((m_in != p_in).sum()) == 2 * n * n
+
+
+@pytest.mark.parametrize("kind", ["X", "T"])
+def test_junction_within_one_surface(kind):
+    """Both planes of the X (T) as one physical surface: its sheets meet along the junction line, 4 (3) triangles
+    an edge there, and are oriented one by one by the sign rule, so the split is the two faults' split."""
+    n = 4
+    mesh, two = junction_mesh(kind, n)
+    mesh.surfaces["net"] = np.concatenate([mesh.surfaces["fx"], mesh.surfaces["fy"]])
+    one = split_faults(mesh, ["net"])
+    assert np.array_equal(one.vert_sides, two.vert_sides) and np.array_equal(one.cell_side, two.cell_side)
+    assert np.array_equal(one.normal, two.normal) and np.all(one.fault_id == 0)

@@ -390,6 +390,31 @@ def test_jacobian_taylor_remainder(taylor):
             assert c["e2"][-1] <= 1e-2 * c["e1"][-1], name
 
 
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_jacobian_taylor_remainder_at_a_junction(ranks):
+    """The Taylor test on two faults crossing (an X junction, 128 faces; 2 ranks: 41 / 87 faces on them): the
+    faces' dofs at the junction vertices are the pieces their cells use, in the residual as in the Jacobian.
+    Stuck everywhere: affine, remainder round-off (3e-7 against a first-order term of 4e5 and more); slipping
+    (with and before a slip increment) and a mix of 43 stick / 43 slip / 42 open faces: order 2.000 measured.
+    (The open case's offset opens fa but not fb here, so its faces switch state between x and x + h v.)"""
+    out = run_script("jacobian_check.py", ranks=ranks, args=["--junction"])
+    assert len(out["faces_per_rank"]) == ranks and min(out["faces_per_rank"]) > 0
+    nf = sum(out["faces_per_rank"])
+    st = out["lagrange_stick"]
+    assert st["states"]["stick"] == nf
+    for e1, e2 in zip(st["e1"], st["e2"]):
+        assert e2 <= 1e-9 * e1, (st["e1"], st["e2"])
+    for name in ("lagrange_slip", "lagrange_slip_start", "lagrange_mixed"):
+        c = out[name]
+        assert c["states_unchanged"], name
+        assert min(c["states"].values()) > 0 if name == "lagrange_mixed" else c["states"]["slip"] == nf, name
+        for o in c["order1"]:
+            assert 0.98 <= o <= 1.02, (name, c["order1"])
+        for o in c["order2"]:
+            assert 1.8 <= o <= 2.2, (name, c["order2"])
+        assert c["e2"][-1] <= 1e-2 * c["e1"][-1], name
+
+
 # ---------------------------------------------------------------------------------------------
 # Lagrange multipliers against penalty
 

@@ -2,7 +2,7 @@
 case converges and keeps its invariant, except the ones listed in KNOWN_FAILURES, which must still fail (strict
 xfail: a fix shows up as an unexpected pass, and the list and docs/performance.md's figures are then to be updated).
 
-The quick study takes 1-2 minutes on the 2-core reference machine (20 runs of seconds each, one at a time, plus a
+The quick study takes 1-2 minutes on the 2-core reference machine (23 runs of seconds each, one at a time, plus a
 3-rank set-up counting each rank's fault faces); its output goes to a temporary directory, not runs/hard_cases.
 """
 
@@ -18,9 +18,7 @@ from studies import hard_cases as hc
 pytestmark = pytest.mark.mpi               # runs under mpirun; part of the default suite (scripts/test.sh)
 TIMEOUT = 900                              # seconds for the whole quick study: a hung run fails the test
 # quick cases the solver fails today, with the symptom (see docs/performance.md, "Hard cases study")
-KNOWN_FAILURES = {
-    "two_faults_crossing": "fault junctions are rejected at input",
-}
+KNOWN_FAILURES = {}
 QUICK = [c.name for c in hc.select(hc.cases(), quick=True)]
 
 
