@@ -158,6 +158,15 @@ def pore_pressure_bubble_load(grad: np.ndarray, vol: np.ndarray, alpha_dp: np.nd
     return (alpha_dp[:, None, None] * bubble_gradient_mean(grad, vol, lface)).reshape(len(vol), 3 * lface.shape[1])
 
 
+def mean_strain(grad: np.ndarray, vol: np.ndarray, lface: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Strain of the bubbles b (n, 3m) of local faces ``lface`` (n, m) averaged over their cells (n, 3, 3):
+    sym(sum_s b_s (x) int grad(phi_s) dV) / V."""
+    w = bubble_gradient_mean(grad, vol, lface)                                         # (n, m, 3)
+    b = b.reshape(len(vol), lface.shape[1], 3)
+    h = np.einsum("nsi,nsj->nij", b, w) / vol[:, None, None]                        # d b_i / d x_j
+    return 0.5 * (h + np.swapaxes(h, 1, 2))
+
+
 def body_bubble_load(vol: np.ndarray, b: np.ndarray, lface: np.ndarray) -> np.ndarray:
     """Load of a constant body force b (n, 3) per cell on the bubbles: (9/40) V b each (n, 3m)."""
     f = (VOLUME_MEAN * vol[:, None] * b)[:, None, :] * (lface >= 0)[:, :, None]
@@ -276,6 +285,12 @@ class CellBubbles:
         """The bubble dofs b (ne, 3m) recovered from the condensed solution."""
         dts = dt[np.maximum(self.face, 0)] * self.valid[:, :, None]
         return self.cond.bubbles(u_loc[self.dofs], dts, self.fb)
+
+    def cell_strain(self, u_loc: np.ndarray, dt: np.ndarray) -> np.ndarray:
+        """The bubbles' strain averaged over each enriched cell (ne, 3, 3), recovered from the condensed solution
+        (``bubble_dofs``): sym(sum_s b_s (x) int grad(phi_s) dV) / V. The stress is linear in it, so the cell
+        mean of the stress of P1 plus bubbles is C:(eps(u) + this)."""
+        return mean_strain(self._grad, self._vol, self.lface, self.bubble_dofs(u_loc, dt))
 
     # -- Jacobian ----------------------------------------------------------------------------------
     def jacobian_blocks(self, drdg: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:

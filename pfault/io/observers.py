@@ -181,13 +181,13 @@ class RunOutput:
         both = np.concatenate([u_rel[dofmap.vertex_dofs(side)] for side in range(dofmap.max_sides)], axis=1)
         u_total = eq.local_array(state.u_ref if initial else state.u)
         dp = eq.loads.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
-        sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
         faults = None
-        if m.faults is not None:
-            # the initial state: no face has slid yet, whenever it is written; it is written after the first step
-            # is solved: its faces without that step's loads
-            slid = np.zeros_like(state.fault_slid) if initial else state.fault_slid
-            with m.faults.bubbles.unloaded() if initial else nullcontext():
+        # the initial state is written after the first step is solved: its face bubbles (in the stress of the cells
+        # beside a fault and in the faces' jumps) without that step's loads; no face has slid yet
+        with m.faults.bubbles.unloaded() if initial and m.faults is not None else nullcontext():
+            sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
+            if m.faults is not None:
+                slid = np.zeros_like(state.fault_slid) if initial else state.fault_slid
                 broken = (m.faults.strength.initially_broken(), np.full(len(slid), np.nan)) if initial else \
                     (state.fault_broken, state.fault_break_time)
                 faults = _fault_fields(m.faults, u_total, u_rel, slid, broken)

@@ -17,6 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..faults import contact as ct
+from ..physics import elasticity as el
 from .loads import Loads
 from .setup import rigid_body_modes
 
@@ -154,7 +155,7 @@ class Equations:
         effective stresses, sigma'_h = K0 sigma'_v, with hydrostatic pore pressure below the water table (K0 =
         -pfault_geostatic_k0, default nu/(1-nu) of each material); no initial shear."""
         s = self.settings
-        sig = self.asm.effective_stress(u_gravity_local)
+        sig = self.effective_stress(u_gravity_local)
         z = self.asm.centroids[:, 2]
         p0 = s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
         alpha = self.asm.alpha
@@ -167,9 +168,22 @@ class Equations:
         sigma0[:, 2, 2] = sv
         return sigma0
 
-    def cell_total_stress(self, u_local: np.ndarray, dp: np.ndarray, sigma0: np.ndarray | None) -> np.ndarray:
-        """Total stress per cell: initial + C:eps(u) - alpha dp I (dp per cell, Pa; ``Loads.cell_dp``)."""
+    def effective_stress(self, u_local: np.ndarray) -> np.ndarray:
+        """Incremental effective stress C:eps per cell (nc, 3, 3), its mean over the cell: of the P1 displacements
+        of ``u_local`` and, in the cells beside a fault face, of the face bubbles recovered from u_local (its
+        multipliers) under the bubbles' load last set."""
         sig = self.asm.effective_stress(u_local)
+        if self.faults is not None:
+            f = self.faults
+            cells = f.bubbles.cell
+            eps = f.bubbles.cell_strain(u_local, f.tractions(u_local) - f.t0)
+            sig[cells] += el.stress(eps, self.asm.lam[cells], self.asm.mu[cells])
+        return sig
+
+    def cell_total_stress(self, u_local: np.ndarray, dp: np.ndarray, sigma0: np.ndarray | None) -> np.ndarray:
+        """Total stress per cell: initial + C:eps(u) - alpha dp I (dp per cell, Pa; ``Loads.cell_dp``), with the
+        face bubbles' strain in the cells beside a fault (``effective_stress``)."""
+        sig = self.effective_stress(u_local)
         if sigma0 is not None:
             sig = sig + sigma0
         return sig - (self.asm.alpha * dp)[:, None, None] * np.eye(3)

@@ -148,8 +148,7 @@ class StepSolver:
         self._monitor_state = None
         if faults is not None:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
-        penalty = faults is not None and any(s.method == "penalty" for s in faults.settings)
-        apply_solver_defaults(linear=faults is None, penalty=penalty)
+        apply_solver_defaults(linear=faults is None)
         opts = PETSc.Options()
         self._atol_user, self._ksp_atol_user = opts.hasName("snes_atol"), opts.hasName("ksp_atol")
         self.snes = snes = PETSc.SNES().create(comm=self.comm)

@@ -90,32 +90,28 @@ def is_direct() -> bool:
     return PETSc.Options().getString("pc_type", "") in ("lu", "cholesky")
 
 
-def apply_solver_defaults(linear: bool = False, penalty: bool = False) -> None:
+def apply_solver_defaults(linear: bool = False) -> None:
     """Code defaults, each only where the user is silent. A linear scene (no fault) needs one linear solve per
-    step: SNES type ksponly. A fault scene runs Newton (newtonls) on the semismooth residual: full steps with
-    Lagrange faces only, backtracking steps when a fault has penalty faces (``penalty``); its step-size test is
-    off (-snes_stol 0: the unknowns mix metres and pascals, so a relative step size means nothing), its absolute
-    tolerance is set per step from the load unless given (pfault.solver.policy.StepSolver.load_tolerance). A direct factorisation is
-    applied once per linear solve (preonly)."""
+    step: SNES type ksponly. A fault scene runs Newton (newtonls) on the semismooth residual with full steps, its
+    step-size test off (-snes_stol 0: the unknowns mix metres and pascals, so a relative step size means nothing),
+    its absolute tolerance set per step from the load unless given (pfault.solver.policy.StepSolver.load_tolerance).
+    A direct factorisation is applied once per linear solve (preonly)."""
     opts = PETSc.Options()
     if linear:
         set_default("snes_type", "ksponly")
         set_default("snes_atol", "1e-12")
     else:
         set_default("snes_stol", "0")
-        # Lagrange faces: full semismooth Newton steps (paper-size Wuxi: 23 iterations over 10 steps). Their law
-        # decides each face's branch from t + c g with c <= E/h, about the stiffness of the cells around the face,
-        # so a step that puts a face on the wrong side of its stick/slip or open/closed switch is undone by the
-        # next one; backtracking on |F| there cost more iterations (quick hard cases: fissure box 13 instead of 9).
-        # Penalty faces: the traction is the return map of the jump with the penalty stiffness k itself, and
-        # k >> E/h shrinks the neighbourhood where full steps converge as 1/k. A face put in slip while it should
-        # stick has no stiffness along its slip, the elastic body sets its next slip increment, which overshoots
-        # the stick disc (radius tau/k) to the opposite side: the slip directions 2-cycle. Fissure box at h/2,
-        # 100 E/h: 120 of 144 slipping faces reversed their slip at every iteration, |F| flat at 4 % of the
-        # load for 50 iterations, also in 2, 4 and 8 sub-steps (the first step of a proportional load from rest
-        # is the same problem at every size). Backtracking on |F| converges there in 13 iterations; at 1e4 E/h
-        # on that mesh it does not either (the neighbourhood keeps shrinking; see docs/theory.md, "Penalty faces").
-        set_default("snes_linesearch_type", "bt" if penalty else "basic")
+        # Full semismooth Newton steps (paper-size Wuxi: 23 iterations over 10 steps). The law decides each face's
+        # branch from t + c g with c <= E/h, about the stiffness of the cells around the face, so a step that
+        # puts a face on the wrong side of its stick/slip or open/closed switch is undone by the next one;
+        # backtracking on |F| mostly costs more iterations (fissure box at h/2, first year: 11 instead of 8; basin
+        # fault, 10 steps: 48 instead of 46; the two blocks at 8 x 4 x 4 one fewer, 6 instead of 7). Penalty
+        # faces take the same rows on their jump less the penalty's compliance (a perturbed Lagrangian), with
+        # the same c: their iterations do not depend on k and are the Lagrange faces' (k = 1e2, 1e4, 1e6 E/h:
+        # 8 with full steps, 11 backtracking; studies/penalty_linesearch.py). Backtracking was their default
+        # while their traction was the return map of the jump with k itself (full steps 2-cycled there).
+        set_default("snes_linesearch_type", "basic")
     if not opts.hasName("pc_type"):
         set_default("pc_type", "lu")
         set_default("pc_factor_mat_solver_type", "mumps")

@@ -182,3 +182,26 @@ def test_uniform_stress_leaves_no_bubble():
     t = R @ sig[0] @ n
     b = cond.bubbles(ue, np.broadcast_to(t, (2, 1, 3)), np.zeros((2, 3)))
     assert np.abs(b).max() < 1e-12 * np.abs(ue).max()
+
+
+def test_mean_strain_against_quadrature():
+    """The bubbles' strain averaged over a cell (what the cells beside a fault add to their stress) against the
+    quadrature of sym(grad(sum_s phi_s b_s)), two bubbles per cell."""
+    x, grad, vol, _ = patch()
+    lface = np.array([[3, 0], [3, 1]])
+    b = RNG.normal(size=(2, 6)) * 1e-3
+    eps = bb.mean_strain(grad, vol, lface, b)
+    pts, w = duffy_rule()
+    for c in range(2):
+        h = np.zeros((3, 3))
+        for s, k in enumerate(lface[c]):
+            f = TET_FACES[k]
+            gp = np.zeros((len(pts), 3))
+            for p in f:
+                others = [v for v in f if v != p]
+                gp += 27 * (pts[:, others[0]] * pts[:, others[1]])[:, None] * grad[c, p][None]
+            h += np.outer(b[c, 3 * s:3 * s + 3], 6 * np.einsum("q,qj->j", w, gp))
+        assert np.allclose(eps[c], 0.5 * (h + h.T), rtol=0, atol=1e-12 * np.abs(h).max())
+    # an empty slot adds nothing
+    assert np.allclose(bb.mean_strain(grad, vol, np.array([[3, -1], [3, -1]]), b),
+                       bb.mean_strain(grad, vol, np.array([[3], [3]]), b[:, :3]), rtol=0, atol=1e-15)

@@ -523,15 +523,17 @@ def test_stuck_faces_are_uniform_and_hold(tmp_path):
 
 
 def test_singular_jacobian_fails_fast_and_says_so(tmp_path, ranks=2):
-    """A geostatic start for the two blocks, whose right block hangs from its sides (nothing holds it up):
-    the K0 initial stress pulls every fault face open at step 0, and with every face open the right block is
+    """A geostatic start for the two blocks, whose right block hangs from its sides (nothing holds it up), with
+    the water table 0.5 m above their top: the water pressure pulls every fault face open at step 0 (at the water
+    table of the top, 0 m, one face stays closed by 5 Pa of effective stress since the initial stress has the
+    face bubbles' strain, and the run converges), and with every face open the right block is
     held in x by nothing, so each Jacobian of step 1 is singular. Each linear solve on such factors stops after
     SINGULAR_MAX_IT Krylov iterations (it ran to -ksp_max_it, 10000, in every one of the 8 sub-step attempts),
     and the step's line names the cause. (On one rank MUMPS's factorisation flags no null pivot here, INFOG(28) =
     0, and FGMRES stops on its divergence test, about 285 iterations per attempt.)"""
     from pfault.solver.policy import SINGULAR_MAX_IT
     proc, s = run_scene(TWO_BLOCKS, tmp_path / "out", ranks=ranks,
-                        extra=["-pfault_geostatic", "true"], check=False)
+                        extra=["-pfault_geostatic", "true", "-pfault_water_table", "0.5"], check=False)
     assert proc.returncode == 3 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     step = s["steps"][-1]
     assert not step["converged"] and step["null_pivots"] > 0, step

@@ -4,9 +4,10 @@ The fissure box with cells halved across the fault (32 x 8 x 10) and penalty fac
 drawdown in one step. With the penalty traction a function of the jump alone, full Newton steps 2-cycled there: a
 face in slip has no stiffness along its slip, the elastic body set its next slip increment and it overshot the stick
 disc (radius tau/k) to the other side (0/40/24 stuck/slipping/open after 21 iterations, then a 4-cycle until the 50
-iterations were spent). Penalty faces default to backtracking steps (pfault.solver.setup.apply_solver_defaults)
-for that reason. Their traction is now an unknown and their law the Lagrange rows on the jump less the penalty's
-compliance, whose branches are decided with c = E/h: full steps converge as the default ones do.
+iterations were spent), and penalty faces defaulted to backtracking steps. Their traction is now an unknown and their
+law the Lagrange rows on the jump less the penalty's compliance, whose branches are decided with c = E/h: full steps,
+the default for every fault (pfault.solver.setup.apply_solver_defaults), converge as backtracking does, and as the
+Lagrange faces do.
 """
 
 import re
@@ -31,11 +32,12 @@ def monitor(stdout):
             re.finditer(r"newton +\d+ +\|F\| (\S+) .*?(?:\((\d+) faces changed state\))?$", stdout, re.M)]
 
 
-def test_penalty_faces_converge_with_default_and_full_steps(tmp_path):
-    """Backtracking (the default) and full steps: the same iterates, converged in 6 Newton iterations (elastic trial
-    included), 17/23/24 faces stuck/slipping/open, |F| from 5.2e5 to 9e-5."""
+def test_penalty_faces_converge_with_default_full_steps(tmp_path):
+    """Full steps (the default) and backtracking: the same final states, 17/23/24 faces stuck/slipping/open, |F|
+    from 5.2e5 to below 1e-9 of it, in at most 8 Newton iterations (elastic trial included; measured 6 with either)
+    and no more with full steps than with backtracking."""
     runs = {}
-    for name, extra in (("default", []), ("basic", ["-snes_linesearch_type", "basic"])):
+    for name, extra in (("default", []), ("bt", ["-snes_linesearch_type", "bt"])):
         proc, s = run_scene(SCENE, tmp_path / name, ranks=2, extra=STEP + extra)
         assert s["converged"], proc.stdout[-3000:]
         step = s["steps"][-1]
@@ -43,5 +45,5 @@ def test_penalty_faces_converge_with_default_and_full_steps(tmp_path):
         assert (step["stick"], step["slip"], step["open"]) == (17, 23, 24), step
         history = monitor(proc.stdout)
         assert history[-1][0] <= 1e-9 * history[0][0], history
-        runs[name] = history
-    assert runs["default"] == runs["basic"]
+        runs[name] = step["newton_its"]
+    assert runs["default"] <= runs["bt"], runs
