@@ -107,12 +107,17 @@ def test_a_fault_that_sticks_reports_no_opening_and_no_slip(runs, ranks):
     n = s["mesh"]["fault_faces"]
     step = s["steps"][-1]
     assert (step["stick"], step["slip"], step["open"]) == (n, 0, 0)
+    nothing = {"slip_potency_m3": 0.0, "open_volume_m3": 0.0, "slipping_area_m2": 0.0, "open_area_m2": 0.0}
     assert step["faults"] == {"fault": {"faces_stuck": n, "faces_slipping": 0, "faces_open": 0,
-                                        "max_opening_m": 0.0, "max_slip_m": 0.0}}
+                                        "max_opening_m": 0.0, "max_slip_m": 0.0, **nothing}}
     assert step["max_fault_opening_m"] == 0.0 and step["max_fault_slip_m"] == 0.0
     assert s["max_fault_opening_m"] == 0.0 and s["max_fault_slip_m"] == 0.0
-    assert s["faults"] == {"fault": {"faces": n, "max_opening_m": 0.0, "max_slip_m": 0.0, "faces_stuck": n,
-                                     "faces_slipping": 0, "faces_open": 0}}
+    # the box's hexahedra, 2 m / cells along x, are split into tetrahedra each with a face on x = 1 and its
+    # fourth vertex a cell's width away
+    width = 2.0 / int(MESH[ranks][1].split(",")[0])
+    assert s["faults"] == {"fault": {"faces": n, "beside_cell_height_m": pytest.approx(width, rel=1e-12),
+                                     "max_opening_m": 0.0, "max_slip_m": 0.0, "faces_stuck": n,
+                                     "faces_slipping": 0, "faces_open": 0, **nothing}}
     assert np.all(f["state"] == 0) and not np.any(f["slid"])
     assert np.max(np.abs(f["opening"])) < 1e-9 and np.max(f["slip_magnitude"]) < 1e-9
 
@@ -138,6 +143,17 @@ def test_reported_maxima_are_those_of_open_and_slid_faces(tmp_path, ranks):
     assert per["max_opening_m"] == s["max_fault_opening_m"] == step["max_fault_opening_m"]
     assert s["max_fault_opening_m"] == pytest.approx(f["opening"][state == 2].max(), rel=1e-12)
     assert s["max_fault_slip_m"] == pytest.approx(f["slip_magnitude"][slid].max(), rel=1e-12)
+    # the fault's integrals are those of fault.h5's faces (face-mean jumps times the triangles' areas)
+    import meshio
+    reader = meshio.xdmf.TimeSeriesReader(os.path.join(str(out), "fault.xdmf"))
+    points, cells = reader.read_points_cells()
+    x = points[np.concatenate([c.data for c in cells if c.type == "triangle"])]
+    area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
+    assert per["slip_potency_m3"] == pytest.approx(np.sum((area * f["slip_magnitude"])[slid]), rel=1e-10)
+    assert per["open_volume_m3"] == pytest.approx(np.sum((area * f["opening"])[state == 2]), rel=1e-10)
+    assert per["slipping_area_m2"] == pytest.approx(area[state == 1].sum(), rel=1e-10)
+    assert per["open_area_m2"] == pytest.approx(area[state == 2].sum(), rel=1e-10)
+    assert per["slip_potency_m3"] == step["faults"][name]["slip_potency_m3"] > 0
     assert np.abs(f["opening"][state != 2]).max() < 1e-9, "closed faces hold (face bubbles)"
 
 
