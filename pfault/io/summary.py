@@ -88,6 +88,7 @@ def fault_summary(model: Any, steps: list) -> dict:
         out[name] = {"faces": int(faces[k]), "beside_cell_height_m": height[k],
                      "max_opening_m": max([p["max_opening_m"] for p in per], default=0.0),
                      "max_slip_m": max([p["max_slip_m"] for p in per], default=0.0),
+                     **dict.fromkeys(("faces_stuck", "faces_slipping", "faces_open"), 0),
                      **{key: v for key, v in last.items() if key not in ("max_opening_m", "max_slip_m")}}
     return out
 
