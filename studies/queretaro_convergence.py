@@ -17,8 +17,8 @@ The variants (one change each, applied in the child process where it is not an o
 scene's (-pfault_queretaro_fault_size 13 instead of 52 m at size factor 1; the layers unchanged); ``vert4``: layers
 a quarter as thick (pfault.mesh.geometry._QRO_DZ; the lateral sizes unchanged); ``iso``: the size at the fault equal
 to the layer thickness (-pfault_queretaro_fault_size 7.142857, 50/7 m: elements about as wide as high beside the
-fault); ``iso-vert2``: iso's width with layers half as thick (the top row of fault faces thinner at the same
-width). The initial state:
+fault); ``iso-vert2``, ``iso-vert4``: iso's width with layers half and a quarter as thick (the top row of fault faces
+thinner at the same width). The initial state:
 ``litho``: the initial stress of flat layers (sigma_v = -rho g depth of each cell's own material, the scene's K0
 rule) instead of the elastic gravity solve's sigma_v, which beside the fault carries the soft sediment hung on the
 rock; ``k01``: K0 = 1. The pore pressure: ``rockdry``: no pore-pressure change in the rock (the flow model's head
@@ -57,6 +57,7 @@ VARIANTS = {
     "vert4": ([], {"vertical": 0.25}),
     "iso": (["-pfault_queretaro_fault_size", "7.142857"], {}),
     "iso-vert2": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.5}),
+    "iso-vert4": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.25}),
     "penalty": (["-pfault_fault_fault_method", "penalty"], {}),
     "k01": (["-pfault_geostatic_k0", "1"], {}),
     "glued": (["-pfault_fault_fault_cohesion", "1e4*MPa"], {}),
