@@ -17,8 +17,8 @@ The variants (one change each, applied in the child process where it is not an o
 scene's (-pfault_queretaro_fault_size 13 instead of 52 m at size factor 1; the layers unchanged); ``vert4``: layers
 a quarter as thick (pfault.mesh.geometry._QRO_DZ; the lateral sizes unchanged); ``iso``: the size at the fault equal
 to the layer thickness (-pfault_queretaro_fault_size 7.142857, 50/7 m: elements about as wide as high beside the
-fault); ``iso-vert2``, ``iso-vert4``: iso's width with layers half and a quarter as thick (the top row of fault faces
-thinner at the same width). The initial state:
+fault); ``iso-vert2``, ``iso-vert4``, ``iso-vert8``: iso's width with layers a half, a quarter and an eighth as thick
+(the top row of fault faces thinner at the same width). The initial state:
 ``litho``: the initial stress of flat layers (sigma_v = -rho g depth of each cell's own material, the scene's K0
 rule) instead of the elastic gravity solve's sigma_v, which beside the fault carries the soft sediment hung on the
 rock; ``k01``: K0 = 1. The pore pressure: ``rockdry``: no pore-pressure change in the rock (the flow model's head
@@ -58,6 +58,7 @@ VARIANTS = {
     "iso": (["-pfault_queretaro_fault_size", "7.142857"], {}),
     "iso-vert2": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.5}),
     "iso-vert4": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.25}),
+    "iso-vert8": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.125}),
     "penalty": (["-pfault_fault_fault_method", "penalty"], {}),
     "k01": (["-pfault_geostatic_k0", "1"], {}),
     "glued": (["-pfault_fault_fault_cohesion", "1e4*MPa"], {}),
@@ -71,7 +72,7 @@ CASES.update({f"{v}-sf{f}": (f, *VARIANTS[v]) for v, fs in (("base", ("1", "0.5"
 STUDY = ([f"{v}-sf{f}" for v in ("base", "litho", "rockdry", "claydry", "dry500", "iso", "glued") for f in FACTORS]
          + [f"{v}-sf{f}" for v in ("lat4", "vert4", "glued-lat4") for f in ("6", "4")]
          + [f"{v}-sf{f}" for v in ("penalty", "k01") for f in ("4", "2")]
-         + ["base-sf1", "base-sf0.5", "iso-sf1.5"])
+         + ["base-sf1", "base-sf0.5", "iso-sf1.5", "iso-vert2-sf2", "iso-vert4-sf2", "iso-vert8-sf2"])
 
 
 def run(name):
@@ -169,7 +170,8 @@ COLUMNS = [("faces", "fault faces", "{:d}"), ("row_depth", "face height m", "{:.
            ("newton_worst", "Newton (worst step)", "{:d}"), ("potency", "potency m^3", "{:.4g}"),
            ("potency_moving", "of slipping/open faces", "{:.4g}"),
            ("potency_top10m", "of faces above 10 m", "{:.4g}"), ("slip_length", "slipping area m^2", "{:.4g}"),
-           ("open_length", "open area m^2", "{:.3g}"), ("open_volume", "open volume m^3", "{:.4g}"), ("slip_depth", "deepest slipping face m", "{:.3g}"),
+           ("open_length", "open area m^2", "{:.3g}"),
+           ("open_volume", "open volume m^3", "{:.4g}"), ("slip_depth", "deepest slipping face m", "{:.3g}"),
            ("top_shear", "top row shear traction Pa (median)", "{:.3g}"),
            ("top_ratio", "top row shear / effective normal (median)", "{:.3g}"),
            ("max_slip_moving", "max slip m", "{:.4g}"), ("max_opening_open", "max opening m", "{:.3g}"),
