@@ -22,6 +22,8 @@ from .faults.breaking import exceeding
 from .faults.contact import OPEN, SLIP, STICK
 from .interrupt import StopRequest
 
+INTEGRALS = ("slip_potency_m3", "open_volume_m3", "slipping_area_m2", "open_area_m2")    # per fault and step
+
 
 @dataclass
 class StepResult:
@@ -88,9 +90,13 @@ def fault_figures(model: Any, states: np.ndarray, slid: np.ndarray, u_rel: np.nd
     (``slid``: slipping or open at the end of a completed step, now or before), 0 where there are none; and
     the largest of these over the faults. The jumps are the face-mean jumps (with the bubbles' part) relative
     to the initial state; a closed face's opening and a stuck face's slip increment are zero to the solver's
-    tolerance, and are not counted here (fault.h5 has every face's jump). ``broken``: each owned face's broken flag
-    and break time, whose figures (``broken_figures``) join each fault's as ``faces_broken``, ``broken_area_m2``,
-    ``broken_depth_m``, ``broken_length_m`` and ``first_break_time_s`` (None if none broke in the run)."""
+    tolerance, and are not counted here (fault.h5 has every face's jump). The integrals over each fault, which
+    converge under refinement where a largest value may not (it sits at a singular point: a fault's tip, its
+    foot on a fixed boundary): the slip potency (m^3, the area integral of the slip of the faces that have slid),
+    the open volume (m^3, of the opening of the open faces) and the slipping and open areas (m^2). ``broken``: each
+    owned face's broken flag and break time, whose figures (``broken_figures``) join each fault's as
+    ``faces_broken``, ``broken_area_m2``, ``broken_depth_m``, ``broken_length_m`` and ``first_break_time_s`` (None
+    if none broke in the run)."""
     faces = model.faults.faces
     names = [f.name for f in model.scene.fault_settings]
     gl = model.faults.relative_jumps(u_rel)[1]     # face-mean jumps with the bubbles' part
@@ -100,12 +106,18 @@ def fault_figures(model: Any, states: np.ndarray, slid: np.ndarray, u_rel: np.nd
     np.add.at(counts, (faces.fault, states), 1)
     largest = np.zeros((len(names), 2))
     np.maximum.at(largest, faces.fault, np.column_stack([opening, slip]))
+    a = faces.area
+    integrals = np.zeros((len(names), 4))
+    np.add.at(integrals, faces.fault, np.column_stack([a * slip, a * opening, a * (states == SLIP),
+                                                       a * (states == OPEN)]))
     mpi = model.comm.tompi4py()
     mpi.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
     mpi.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
+    mpi.Allreduce(MPI.IN_PLACE, integrals, op=MPI.SUM)
     per = {name: {"faces_stuck": int(c[STICK]), "faces_slipping": int(c[SLIP]), "faces_open": int(c[OPEN]),
-                  "max_opening_m": float(m[0]), "max_slip_m": float(m[1])}
-           for name, c, m in zip(names, counts, largest)}
+                  "max_opening_m": float(m[0]), "max_slip_m": float(m[1]),
+                  **dict(zip(INTEGRALS, (float(v) for v in i)))}
+           for name, c, m, i in zip(names, counts, largest, integrals)}
     if broken is not None:
         for (name, p), b in zip(per.items(), broken_figures(model, *broken)):
             p.update({"faces_broken": int(b[0]), "broken_area_m2": float(b[1]), "broken_depth_m": float(b[2]),

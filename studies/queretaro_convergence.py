@@ -4,8 +4,9 @@ that each change one thing, to find why the slip potency shrinks with the mesh.
     .venv/bin/python benchmarks/queretaro_convergence.py [--cases NAME,...] [--no-run] [--list]
 
 Each case (by default those docs/verification.md gives) runs the scene on 2 ranks (one run at a time) into
-runs/queretaro_convergence/<case>/ at size factor 6, 4, 3 or 2 (the case's name ends in -sf<F>); then one table of
-year 10 is printed and written to runs/queretaro_convergence/table.md, with the measures of
+runs/queretaro_convergence/<case>/ at size factor 6, 4, 3 or 2, the scene itself also at 1 (the paper's mesh, about
+70 s) and 0.5 (1.37 million unknowns, 24 min), iso also at 1.5 (9 min) and 1 (the case's name ends in -sf<F>); then
+one table of year 10 is printed and written to runs/queretaro_convergence/table.md, with the measures of
 studies/fault_convergence.py (fault.h5 and summary.json) as totals over the fault (m^3, m^2; the fault is 30 km
 long), the depth of the deepest slipping face, and the median shear traction of the top row of faces (those
 touching the land surface, within 5 km along the fault of the wells' middle) and its ratio to their effective
@@ -16,7 +17,8 @@ The variants (one change each, applied in the child process where it is not an o
 scene's (-pfault_queretaro_fault_size 13 instead of 52 m at size factor 1; the layers unchanged); ``vert4``: layers
 a quarter as thick (pfault.mesh.geometry._QRO_DZ; the lateral sizes unchanged); ``iso``: the size at the fault equal
 to the layer thickness (-pfault_queretaro_fault_size 7.142857, 50/7 m: elements about as wide as high beside the
-fault). The initial state:
+fault); ``iso-vert2``, ``iso-vert4``, ``iso-vert8``: iso's width with layers a half, a quarter and an eighth as thick
+(the top row of fault faces thinner at the same width). The initial state:
 ``litho``: the initial stress of flat layers (sigma_v = -rho g depth of each cell's own material, the scene's K0
 rule) instead of the elastic gravity solve's sigma_v, which beside the fault carries the soft sediment hung on the
 rock; ``k01``: K0 = 1. The pore pressure: ``rockdry``: no pore-pressure change in the rock (the flow model's head
@@ -54,16 +56,23 @@ VARIANTS = {
     "lat4": (["-pfault_queretaro_fault_size", "13"], {}),
     "vert4": ([], {"vertical": 0.25}),
     "iso": (["-pfault_queretaro_fault_size", "7.142857"], {}),
+    "iso-vert2": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.5}),
+    "iso-vert4": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.25}),
+    "iso-vert8": (["-pfault_queretaro_fault_size", "7.142857"], {"vertical": 0.125}),
     "penalty": (["-pfault_fault_fault_method", "penalty"], {}),
     "k01": (["-pfault_geostatic_k0", "1"], {}),
     "glued": (["-pfault_fault_fault_cohesion", "1e4*MPa"], {}),
     "glued-lat4": (["-pfault_fault_fault_cohesion", "1e4*MPa", "-pfault_queretaro_fault_size", "13"], {}),
 }
 CASES = {f"{v}-sf{f}": (f, opts, patch) for v, (opts, patch) in VARIANTS.items() for f in FACTORS}
+# finer: the scene itself at the size factors of the paper's mesh and half of it, iso down to 7.1 m
+CASES.update({f"{v}-sf{f}": (f, *VARIANTS[v]) for v, fs in (("base", ("1", "0.5")), ("iso", ("1.5", "1")))
+              for f in fs})
 # the cases of docs/verification.md (the default): every variant at the size factors its row gives
 STUDY = ([f"{v}-sf{f}" for v in ("base", "litho", "rockdry", "claydry", "dry500", "iso", "glued") for f in FACTORS]
          + [f"{v}-sf{f}" for v in ("lat4", "vert4", "glued-lat4") for f in ("6", "4")]
-         + [f"{v}-sf{f}" for v in ("penalty", "k01") for f in ("4", "2")])
+         + [f"{v}-sf{f}" for v in ("penalty", "k01") for f in ("4", "2")]
+         + ["base-sf1", "base-sf0.5", "iso-sf1.5", "iso-vert2-sf2", "iso-vert4-sf2", "iso-vert8-sf2"])
 
 
 def run(name):
@@ -161,7 +170,8 @@ COLUMNS = [("faces", "fault faces", "{:d}"), ("row_depth", "face height m", "{:.
            ("newton_worst", "Newton (worst step)", "{:d}"), ("potency", "potency m^3", "{:.4g}"),
            ("potency_moving", "of slipping/open faces", "{:.4g}"),
            ("potency_top10m", "of faces above 10 m", "{:.4g}"), ("slip_length", "slipping area m^2", "{:.4g}"),
-           ("open_length", "open area m^2", "{:.3g}"), ("slip_depth", "deepest slipping face m", "{:.3g}"),
+           ("open_length", "open area m^2", "{:.3g}"),
+           ("open_volume", "open volume m^3", "{:.4g}"), ("slip_depth", "deepest slipping face m", "{:.3g}"),
            ("top_shear", "top row shear traction Pa (median)", "{:.3g}"),
            ("top_ratio", "top row shear / effective normal (median)", "{:.3g}"),
            ("max_slip_moving", "max slip m", "{:.4g}"), ("max_opening_open", "max opening m", "{:.3g}"),

@@ -111,25 +111,43 @@ def test_a_fault_that_sticks_reports_no_opening_and_no_slip(runs, ranks):
     broken = {"faces_broken": n, "broken_area_m2": pytest.approx(1.0, rel=1e-12),
               "broken_depth_m": pytest.approx(1.0, rel=1e-12), "broken_length_m": pytest.approx(1.0, rel=1e-12),
               "first_break_time_s": None}
+    nothing = {"slip_potency_m3": 0.0, "open_volume_m3": 0.0, "slipping_area_m2": 0.0, "open_area_m2": 0.0}
     assert step["faults"] == {"fault": {"faces_stuck": n, "faces_slipping": 0, "faces_open": 0,
-                                        "max_opening_m": 0.0, "max_slip_m": 0.0, **broken}}
+                                        "max_opening_m": 0.0, "max_slip_m": 0.0, **nothing, **broken}}
     assert step["max_fault_opening_m"] == 0.0 and step["max_fault_slip_m"] == 0.0
     assert s["max_fault_opening_m"] == 0.0 and s["max_fault_slip_m"] == 0.0
-    assert s["faults"] == {"fault": {"faces": n, "max_opening_m": 0.0, "max_slip_m": 0.0, "faces_stuck": n,
-                                     "faces_slipping": 0, "faces_open": 0, **broken}}
+    # the box's hexahedra, 2 m / cells along x, are split into tetrahedra each with a face on x = 1 and its
+    # fourth vertex a cell's width away
+    width = 2.0 / int(MESH[ranks][1].split(",")[0])
+    assert s["faults"] == {"fault": {"faces": n, "beside_cell_height_m": pytest.approx(width, rel=1e-12),
+                                     "max_opening_m": 0.0, "max_slip_m": 0.0, "faces_stuck": n,
+                                     "faces_slipping": 0, "faces_open": 0, **nothing, **broken}}
     assert np.all(f["state"] == 0) and not np.any(f["slid"])
     assert np.max(np.abs(f["opening"])) < 1e-9 and np.max(f["slip_magnitude"]) < 1e-9
 
 
+@pytest.fixture(scope="module")
+def wuxi_runs(tmp_path_factory):
+    """Wuxi (size factor 3) after 2 years in one step, made on first use: wuxi_runs(ranks) -> (summary, out)."""
+    from conftest import WUXI
+    cache = {}
+
+    def get(ranks):
+        if ranks not in cache:
+            out = tmp_path_factory.mktemp(f"wuxi{ranks}")
+            _, s = run_scene(WUXI, out, ranks=ranks, extra=["-pfault_mesh_size_factor", "3", "-pfault_time_steps",
+                                                             "1", "-pfault_time_end", "2*year"])
+            cache[ranks] = (s, out)
+        return cache[ranks]
+    return get
+
+
 @pytest.mark.parametrize("ranks", [1, 2])
-def test_reported_maxima_are_those_of_open_and_slid_faces(tmp_path, ranks):
+def test_reported_maxima_are_those_of_open_and_slid_faces(wuxi_runs, ranks):
     """Wuxi (size factor 3) after 2 years in one step: 74 faces stuck, 12 slipping, 540 open. The reported
     opening is the largest of the open faces' (a closed face's is not counted), the
     slip the largest of the faces that have slid; the counts per fault are those of fault.h5's states."""
-    from conftest import WUXI
-    out = tmp_path / "wuxi"
-    _, s = run_scene(WUXI, out, ranks=ranks, extra=["-pfault_mesh_size_factor", "3", "-pfault_time_steps", "1",
-                                                     "-pfault_time_end", "2*year"])
+    s, out = wuxi_runs(ranks)
     f = read_fault(out)
     state, slid = f["state"], f["slid"].astype(bool)
     counts = np.bincount(state, minlength=3)
@@ -142,7 +160,28 @@ def test_reported_maxima_are_those_of_open_and_slid_faces(tmp_path, ranks):
     assert per["max_opening_m"] == s["max_fault_opening_m"] == step["max_fault_opening_m"]
     assert s["max_fault_opening_m"] == pytest.approx(f["opening"][state == 2].max(), rel=1e-12)
     assert s["max_fault_slip_m"] == pytest.approx(f["slip_magnitude"][slid].max(), rel=1e-12)
+    # the fault's integrals are those of fault.h5's faces (face-mean jumps times the triangles' areas)
+    import meshio
+    reader = meshio.xdmf.TimeSeriesReader(os.path.join(str(out), "fault.xdmf"))
+    points, cells = reader.read_points_cells()
+    x = points[np.concatenate([c.data for c in cells if c.type == "triangle"])]
+    area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
+    assert per["slip_potency_m3"] == pytest.approx(np.sum((area * f["slip_magnitude"])[slid]), rel=1e-10)
+    assert per["open_volume_m3"] == pytest.approx(np.sum((area * f["opening"])[state == 2]), rel=1e-10)
+    assert per["slipping_area_m2"] == pytest.approx(area[state == 1].sum(), rel=1e-10)
+    assert per["open_area_m2"] == pytest.approx(area[state == 2].sum(), rel=1e-10)
+    assert per["slip_potency_m3"] == step["faults"][name]["slip_potency_m3"] > 0
     assert np.abs(f["opening"][state != 2]).max() < 1e-9, "closed faces hold (face bubbles)"
+
+
+def test_fault_integrals_agree_on_1_and_2_ranks(wuxi_runs):
+    """The fault's integrals and the height of the cells beside it do not depend on the partition."""
+    (one, _), (two, _) = wuxi_runs(1), wuxi_runs(2)
+    (name, a), = one["faults"].items()
+    b = two["faults"][name]
+    assert a["beside_cell_height_m"] == pytest.approx(b["beside_cell_height_m"], rel=1e-12)
+    for key in ("slip_potency_m3", "open_volume_m3", "slipping_area_m2", "open_area_m2"):
+        assert a[key] > 0 and a[key] == pytest.approx(b[key], rel=1e-6), key
 
 
 # ---------------------------------------------------------------------------------------------
