@@ -1,7 +1,9 @@
 #!/usr/bin/env python
-"""Fault faces owned by each rank for the two-blocks scene (extra options from the command line).
+"""Fault faces owned by each rank for the two-blocks scene, or the scene named by --scene (extra options from the
+command line).
 
     mpirun -n 2 python tests/scripts/fault_partition.py -pfault_box_cells 8,4,4
+    mpirun -n 2 python tests/scripts/fault_partition.py --scene junction.opts -pfault_box_fault_planes ...
 
 Prints JSON {"ranks": N, "faces_per_rank": [...], "fault_faces": total, "cell_ranks": [...]} (cell_ranks: the
 rank of each cell, in serial order). A face belongs to the rank that owns its minus cell
@@ -14,6 +16,9 @@ import numpy as np
 import petsc4py
 
 SCENE = "config/two_blocks.opts"
+if sys.argv[1:2] == ["--scene"]:
+    SCENE = sys.argv[2]
+    del sys.argv[1:3]
 petsc4py.init([sys.argv[0], "-options_file", SCENE] + sys.argv[1:])
 from petsc4py import PETSc  # noqa: E402
 
