@@ -56,11 +56,13 @@ QUERETARO_DEFAULTS: dict[str, Any] = dict(
     clay_thickness=20.0,             # clay aquitard 0..20 m over the sand aquifer 20..50 m (m)
     wells=QUERETARO_WELLS,           # (x, y) of the pumping wells (m); refinement only
     fault_size=52.0,                 # element size along and across the fault at size_factor 1 (m)
+    surface_size=None,               # element height at the land surface at size_factor 1 (m); None: layers
 )
 _QRO_GROWTH = 0.25
 _QRO_H_WELL = 40.0
 _QRO_H_MAX = 1000.0
 _QRO_DZ = 50.0 / 7.0                 # layer thickness of the extrusion at size_factor 1 (7 layers)
+_QRO_DZ_GROWTH = 0.5                 # growth of the layer height with depth under surface_size (m per m)
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -365,7 +367,7 @@ def _wuxi_sizes(gmsh, fissure, p, f):
 # ------------------------------------------------------------------------------------------------------
 # Queretaro
 # ------------------------------------------------------------------------------------------------------
-def _queretaro_params(params):
+def _queretaro_params(params, f=1.0):
     _unknown(params, QUERETARO_DEFAULTS, "pfault_queretaro_")
     p = dict(QUERETARO_DEFAULTS)
     p.update({k: v for k, v in params.items() if v is not None})
@@ -379,6 +381,13 @@ def _queretaro_params(params):
     hf = p["fault_size"] = _real(p["fault_size"], "pfault_queretaro_fault_size")
     if not 1.0 <= hf <= _QRO_H_MAX:
         raise InputError(f"-pfault_queretaro_fault_size: must lie in [1, {_QRO_H_MAX:g}] m, got {hf:g}")
+    if p["surface_size"] is not None:
+        hs = p["surface_size"] = _real(p["surface_size"], "pfault_queretaro_surface_size")
+        top = min(_QRO_DZ, tc / f)
+        if not 0.1 <= hs <= top:
+            raise InputError(f"-pfault_queretaro_surface_size: must lie in [0.1, {top:.4g}] m (at most the "
+                             f"layers' height, and the clay's thickness over the size factor), got {hs:g}; leave "
+                             f"it out for uniform layers")
     wells = p["wells"]
     try:
         arr = np.asarray(wells, dtype=float)
@@ -416,8 +425,12 @@ def queretaro_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     size field, and the triangles are extruded downwards into prisms split into three tetrahedra each,
     in layers of about 7.1 m (3 in the clay, 4 in the sand at size_factor 1). Flat elements in horizontal
     layers keep the layer interfaces, the fault and the vertical resolution exact whatever the lateral
-    size; the fault is the extrusion of the edge the rock and sediment parts of the land surface share
-    after an OCC fragment, so its triangles are shared by the tetrahedra on both sides. Lateral sizes
+    size. ``surface_size`` (default: none) grades the layers towards the land surface: the top layer is
+    ``surface_size`` high (times ``size_factor``), the layers below grow by 0.5 m per metre of depth up to the
+    layers' own height (the thin rows of fault faces under the land surface, where the fault slips and opens,
+    without thinning the whole depth). The fault is the extrusion of the edge the rock and sediment parts of the
+    land surface share after an OCC fragment, so its triangles are shared by the tetrahedra on both sides. Lateral
+    sizes
     (times ``size_factor``): ``fault_size`` (52 m) along the fault (577 segments over 30 km, x 7 layers x 2 =
     8078 fault triangles) and 40 m at the wells, growing by 0.25 m per metre of distance, at most 1 km. The
     fault's slip converges under refinement only with elements about as wide as high beside the fault
@@ -425,7 +438,7 @@ def queretaro_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     column of sediment as wide as the elements beside it (docs/verification.md, calibrated Queretaro).
     """
     f = _check_factor(size_factor)
-    p = _queretaro_params(params)
+    p = _queretaro_params(params, f)
     with _gmsh_model("pfault_queretaro") as gmsh:
         volumes = _queretaro_volumes(gmsh.model.occ, p, f)
         _queretaro_groups(gmsh, volumes, p)
@@ -447,19 +460,43 @@ def _queretaro_volumes(occ, p, f):
     lx, ly, depth = QUERETARO_SIZE
     xf, tc = p["fault_x"], p["clay_thickness"]
     ts = depth - tc
-    n_clay = max(1, int(round(tc / (_QRO_DZ * f))))
-    n_sand = max(1, int(round(ts / (_QRO_DZ * f))))
     rock = occ.addRectangle(0.0, 0.0, 0.0, xf, ly)
     sed = occ.addRectangle(xf, 0.0, 0.0, lx - xf, ly)
     top, _ = occ.fragment([(2, rock)], [(2, sed)])
     top = sorted(dt for dt in top if dt[0] == 2)
-    out1 = occ.extrude(top, 0.0, 0.0, -tc, numElements=[n_clay], recombine=False)
+    if p["surface_size"] is None:
+        clay = dict(numElements=[max(1, int(round(tc / (_QRO_DZ * f))))])
+        sand = dict(numElements=[max(1, int(round(ts / (_QRO_DZ * f))))])
+    else:
+        z = graded_layers(p["surface_size"] * f, _QRO_DZ * f, _QRO_DZ_GROWTH, (tc, depth))
+        clay, sand = (dict(numElements=[1] * len(b), heights=list((b - a) / (b[-1] - a)))
+                      for a, b in ((0.0, z[(z > 0) & (z <= tc)]), (tc, z[z > tc])))
+    out1 = occ.extrude(top, 0.0, 0.0, -tc, recombine=False, **clay)
     mid = [out1[i - 1] for i, dt in enumerate(out1) if dt[0] == 3]
     vols1 = [dt for dt in out1 if dt[0] == 3]
-    out2 = occ.extrude(mid, 0.0, 0.0, -ts, numElements=[n_sand], recombine=False)
+    out2 = occ.extrude(mid, 0.0, 0.0, -ts, recombine=False, **sand)
     vols2 = [dt for dt in out2 if dt[0] == 3]
     occ.synchronize()
     return vols1 + vols2
+
+
+def graded_layers(h0: float, h_max: float, growth: float, interfaces: ArrayLike) -> np.ndarray:
+    """Depths (m, from 0 down to ``interfaces[-1]``) of the boundaries of layers whose height is ``h0`` at the
+    surface and grows below it with depth d as min(h_max, h0 + growth*(d - h0)): the first layer exactly ``h0``
+    high, each interval between interfaces then cut into the nearest whole number of layers of that height, spaced
+    evenly in the measure of the integral of 1/height, so every interface is a layer boundary."""
+    interfaces = [float(z) for z in np.ravel(interfaces)]
+    grid = np.linspace(0.0, interfaces[-1], 200001)
+    height = np.minimum(h_max, h0 + growth * np.maximum(0.0, grid[:-1] - h0))
+    count = np.concatenate(([0.0], np.cumsum(np.diff(grid) / height)))
+    bounds = [0.0, h0]
+    for a, b in zip([h0, *interfaces[:-1]], interfaces):
+        if b <= a + 1e-9 * b:
+            continue
+        ca, cb = np.interp([a, b], grid, count)
+        n = max(1, int(round(cb - ca)))
+        bounds += list(np.interp(ca + (cb - ca) * np.arange(1, n + 1) / n, count, grid)[:-1]) + [b]
+    return np.array(bounds)
 
 
 def _queretaro_groups(gmsh, volumes, p):

@@ -176,6 +176,27 @@ def test_deterministic_and_leaves_callers_gmsh_alone():
     assert np.array_equal(a.cell_material, b.cell_material)
 
 
+def _fault_rows(mesh):
+    """Depths (m) of the boundaries of the rows of fault faces, from the land surface down."""
+    return np.unique(np.round(-mesh.points[np.unique(mesh.surfaces["fault"])][:, 2], 6))
+
+
+@pytest.mark.parametrize("surface_size", [0.6, 1.2])
+def test_queretaro_surface_size_grades_the_rows_beside_the_fault(queretaro, surface_size):
+    f = 3.0
+    m = geometry.queretaro_mesh(f, surface_size=surface_size)
+    rows = _fault_rows(m)
+    heights = np.diff(rows)
+    assert heights[0] == pytest.approx(f * surface_size, rel=1e-9, abs=1e-6)   # the top row: the option
+    assert np.all(heights[1:] <= f * 50.0 / 7.0 * 1.1)                         # growing to the layers' height
+    assert np.all(heights[1:] >= heights[0] * (1.0 - 1e-9))
+    assert np.all(heights[1:] / heights[:-1] <= 2.0)                           # graded: no row twice the last
+    assert np.any(np.isclose(rows, 20.0)) and rows[-1] == pytest.approx(50.0)  # the clay's base: a layer face
+    assert np.isclose(material_volumes(m)["clay"], 20000.0 * 30000.0 * 20.0, rtol=1e-9)
+    # the default: the uniform layers, untouched by the grading code
+    assert np.allclose(np.diff(_fault_rows(queretaro)), [20.0, 30.0])
+
+
 @pytest.mark.parametrize("build,kwargs,option", [
     (geometry.wuxi_mesh, {"size_factor": 0.0}, "-pfault_mesh_size_factor"),
     (geometry.wuxi_mesh, {"size_factor": "x"}, "-pfault_mesh_size_factor"),
@@ -191,6 +212,12 @@ def test_deterministic_and_leaves_callers_gmsh_alone():
     (geometry.queretaro_mesh, {"clay_thickness": 50.0}, "-pfault_queretaro_clay_thickness"),
     (geometry.queretaro_mesh, {"fault_size": 0.5}, "-pfault_queretaro_fault_size"),
     (geometry.queretaro_mesh, {"fault_size": "x"}, "-pfault_queretaro_fault_size"),
+    (geometry.queretaro_mesh, {"surface_size": 0.0}, "-pfault_queretaro_surface_size"),
+    (geometry.queretaro_mesh, {"surface_size": -1.0}, "-pfault_queretaro_surface_size"),
+    (geometry.queretaro_mesh, {"surface_size": 8.0}, "-pfault_queretaro_surface_size"),
+    (geometry.queretaro_mesh, {"surface_size": 3.0, "clay_thickness": 2.0}, "-pfault_queretaro_surface_size"),
+    (geometry.queretaro_mesh, {"surface_size": 7.0, "size_factor": 3.0}, "-pfault_queretaro_surface_size"),
+    (geometry.queretaro_mesh, {"surface_size": "x"}, "-pfault_queretaro_surface_size"),
     (geometry.queretaro_mesh, {"wells": [12000.0, 12000.0, 13000.0]}, "-pfault_queretaro_wells"),
     (geometry.queretaro_mesh, {"wells": [5000.0, 12000.0]}, "-pfault_queretaro_wells"),
 ])
