@@ -39,15 +39,13 @@ FINE_ZONE = 0.25     # crack half-lengths around the crack meshed at h
 def make_crack_mesh(path, a=1.0, L=10.0, n=8):
     """Write the slab mesh (MSH 4.1) to ``path``; return its sizes."""
     import gmsh
+
+    from gmsh_session import gmsh_session, write_msh41
+
     h = a / n
     h_far = L / 4.0
     slope = GRADE * h / a
-    initialized = gmsh.isInitialized()
-    if not initialized:
-        gmsh.initialize(["frictional-crack-mesh"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
-        gmsh.clear()
+    with gmsh_session("frictional-crack-mesh"):
         gmsh.model.add("frictional_crack")
         occ = gmsh.model.occ
         # the x-z section drawn in the x-y plane (y standing for z), turned into the x-z plane below
@@ -118,13 +116,7 @@ def make_crack_mesh(path, a=1.0, L=10.0, n=8):
         tets = len(gmsh.model.mesh.getElementsByType(4)[0])
         tris = sum(len(gmsh.model.mesh.getElementsByType(2, s)[0]) for s in groups["crack"])
         nodes = len(gmsh.model.mesh.getNodes()[0])
-        gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
-        gmsh.option.setNumber("Mesh.Binary", 0)
-        gmsh.write(str(path))
-    finally:
-        gmsh.clear()
-        if not initialized:
-            gmsh.finalize()
+        write_msh41(gmsh, path)
     return {"path": str(path), "nodes": int(nodes), "tets": int(tets), "crack_triangles": int(tris), "h": h}
 
 

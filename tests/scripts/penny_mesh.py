@@ -35,16 +35,14 @@ TIP_ZONE = 0.05      # crack radii around the tip meshed at TIP_FACTOR * h_c
 def make_penny_mesh(path, a=1.0, L=8.0, n=8):
     """Write the quarter penny-crack mesh (MSH 4.1) to ``path``; return its sizes."""
     import gmsh
+
+    from gmsh_session import gmsh_session, write_msh41
+
     h_crack = a / n
     h_tip = TIP_FACTOR * h_crack
     h_far = L / 4.0
     slope = GRADE * h_crack / a
-    initialized = gmsh.isInitialized()
-    if not initialized:
-        gmsh.initialize(["penny-mesh"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
-        gmsh.clear()
+    with gmsh_session("penny-mesh"):
         gmsh.model.add("penny")
         occ = gmsh.model.occ
         box = occ.addBox(0.0, 0.0, -L, L, L, 2.0 * L)
@@ -126,13 +124,7 @@ def make_penny_mesh(path, a=1.0, L=8.0, n=8):
         tets = len(gmsh.model.mesh.getElementsByType(4)[0])
         tris = len(gmsh.model.mesh.getElementsByType(2, groups["crack"][0])[0])
         nodes = len(gmsh.model.mesh.getNodes()[0])
-        gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
-        gmsh.option.setNumber("Mesh.Binary", 0)
-        gmsh.write(str(path))
-    finally:
-        gmsh.clear()
-        if not initialized:
-            gmsh.finalize()
+        write_msh41(gmsh, path)
     return {"path": str(path), "nodes": int(nodes), "tets": int(tets), "crack_triangles": int(tris)}
 
 
