@@ -13,6 +13,12 @@ The policy's constants, each measured where it was chosen:
   (``FactorReuse.monitor``).
 - ``REUSE_ITERATIONS_PER_FACE``: Krylov iterations on kept factors one changed face is expected to cost
   (``FactorReuse.budget``).
+- ``FACTOR_FLOP_RATE``: how many times more flops per second MUMPS's factorisation runs (dense blocks) than an
+  FGMRES iteration on its factors (triangular solves and a product with the operator, bound by memory); with it
+  MUMPS's flop counts give a factorisation's cost in iterations (``factorisation_cost``). Measured by timing both
+  (median over a run's factorisations) on Wuxi at 13.7k, 26k, 46k and 84k unknowns on 2 ranks: 5.1, 7.2, 8.7,
+  8.8 (26k on 1 rank: 6.5), calibrated Queretaro at 35k: 9.4; the smaller the fronts the lower, so a small
+  problem's factorisation is counted up to 1.6 times too cheap, which only refactors it a little sooner.
 - The per-step nonlinear tolerance: unless -snes_atol is given, a fault step converges once |F| <= -snes_rtol
   times the forces of the problem (``StepSolver.load_tolerance``).
 """
@@ -35,6 +41,7 @@ from .setup import apply_solver_defaults, is_direct
 KSP_ATOL_FRACTION = 0.1     # Krylov tolerance of a fault step, relative to its nonlinear one
 SINGULAR_MAX_IT = 10        # Krylov iterations of a solve on factors with null pivots
 REUSE_ITERATIONS_PER_FACE = 6   # Krylov iterations per changed face on kept factors (3 rows, doubled for drift)
+FACTOR_FLOP_RATE = 8.0          # MUMPS's factorisation flops per second over an FGMRES iteration's on its factors
 
 
 def factorizations() -> int:
@@ -55,20 +62,21 @@ class FactorReuse:
     FGMRES preconditioned by the old factors solves a Jacobian that differs from the factored one by the slipping
     faces' values and the states of a few faces in a few iterations. The factors are kept while the faces whose
     state changed since the factorisation cost fewer iterations (``REUSE_ITERATIONS_PER_FACE`` each) than one
-    factorisation, both timed in this run by a KSP monitor, and refactored after a kept solve that took longer
-    than one factorisation. Calibrated Queretaro at paper size: 22 factorisations instead of 30 for the same 36
-    Newton iterations. Factors with null pivots (a singular Jacobian) are never kept."""
+    factorisation, and refactored after a kept solve that took more iterations than one factorisation costs.
+    The cost of a factorisation in Krylov iterations is computed from MUMPS's own counts of that factorisation
+    (``factorisation_cost``), not timed: the decisions, and so the answer, are the same in every run of a scene
+    on the same ranks, whatever else the machine is doing. Calibrated Queretaro at paper size: 22 factorisations
+    instead of 30 for the same 36 Newton iterations. Factors with null pivots (a singular Jacobian) are never kept;
+    factors of another package than MUMPS are kept only while no face changes state."""
 
     def __init__(self, comm: Any, ksp: Any) -> None:
         self.mpi = comm.tompi4py()
         self.max_it = ksp.getTolerances()[3]        # -ksp_max_it (capped on singular factors)
         self.factor_states: np.ndarray | None = None    # faces' states of the Jacobian last factored
-        self.t_factor: float | None = None          # seconds per factorisation (measured)
-        self.t_iteration: float | None = None       # seconds per Krylov iteration on the factors (measured)
+        self.cost: float | None = None              # the last factorisation's cost in Krylov iterations
         self.null_pivots = 0                        # null pivots MUMPS fixed in the factors in use
         self.step_null_pivots = 0                   # the most seen in the step being solved
-        self._factoring: float | None = None
-        self._t_krylov0: float | None = None
+        self._factored = False                      # a factorisation is due before the next solve
         self._kept_its: int | None = None
         ksp.setMonitor(self.monitor)
 
@@ -86,35 +94,29 @@ class FactorReuse:
         set_lag_preconditioner(snes, -1 if keep else -2)        # SNES sets the PC's flag after this
         if not keep:
             self.factor_states = np.array(state)
-            self._factoring = time.perf_counter()
+            self._factored = True
 
     def budget(self) -> int:
         """How many faces may differ in state from the factored Jacobian before a new factorisation pays: a
         face's state changes at most its 3 multiplier rows, and FGMRES on the old factors needs about one
-        iteration per changed row, doubled for the slipping faces' drift. 0 until both costs have been timed.
-        (Calibrated Queretaro: a factorisation costs 25-30 iterations; 2 changed faces took 11-13 iterations,
-        12 took 35.) Collective: every rank takes part whether or not its costs are known."""
-        tf, ti = self.t_factor, self.t_iteration
-        ratio = tf / ti if tf is not None and ti else 0.0
-        return int(self.mpi.allreduce(ratio, op=MPI.MIN) // REUSE_ITERATIONS_PER_FACE)
+        iteration per changed row, doubled for the slipping faces' drift. 0 until a factorisation has been
+        counted. (Calibrated Queretaro: a factorisation costs 25-30 iterations; 2 changed faces took 11-13
+        iterations, 12 took 35.)"""
+        return int(self.cost // REUSE_ITERATIONS_PER_FACE) if self.cost is not None else 0
 
     def kept_too_long(self) -> bool:
-        """The last linear solve on kept factors took longer than a factorisation (reduced by the caller)."""
-        tf, ti = self.t_factor, self.t_iteration
-        return tf is not None and ti is not None and (self._kept_its or 0) * ti > tf
+        """The last linear solve on kept factors took more iterations than a factorisation costs."""
+        return self.cost is not None and (self._kept_its or 0) > self.cost
 
     def monitor(self, ksp: Any, its: int, rnorm: float) -> None:
-        """KSP monitor: times the factorisation (from the Jacobian's assembly to the first residual norm) and one
-        Krylov iteration (each one triangular solve on the factors), and counts the iterations of a solve on
-        kept factors."""
-        now = time.perf_counter()
+        """KSP monitor (collective): at the first residual of a solve on new factors, their cost and null pivots;
+        counts the iterations of a solve on kept factors."""
         if its == 0:
-            factoring = self._factoring
-            fresh = factoring is not None
-            if factoring is not None:
-                self.t_factor = now - factoring
+            fresh = self._factored
+            if fresh:
+                self.cost = factorisation_cost(ksp)
                 self.null_pivots = mumps_null_pivots(ksp.getPC())
-            self._factoring = None
+            self._factored = False
             # Factors of a singular Jacobian (MUMPS fixes its null pivots: -mat_mumps_icntl_24 1) solve a
             # consistent system in one iteration (two blocks, one held by nothing: 1 in each Newton iteration)
             # and an inconsistent one never: part of the body held by nothing but open faces ran FGMRES to
@@ -124,12 +126,24 @@ class FactorReuse:
             if ksp.getTolerances()[3] != cap:
                 ksp.setTolerances(max_it=cap)
             self.step_null_pivots = max(self.step_null_pivots, self.null_pivots)
-            self._t_krylov0 = now
             self._kept_its = None if fresh else 0
-        elif self._t_krylov0 is not None:
-            self.t_iteration = (now - self._t_krylov0) / its
-            if self._kept_its is not None:
-                self._kept_its = its
+        elif self._kept_its is not None:
+            self._kept_its = its
+
+
+def factorisation_cost(ksp: Any) -> float | None:
+    """What the factorisation in ``ksp``'s PC costs in FGMRES iterations on its factors, from MUMPS's counts
+    (collective): its flops (RINFOG(3)) over ``FACTOR_FLOP_RATE`` times an iteration's flops (a forward and
+    backward solve, 2 per entry of the factors, INFOG(29); a product with the operator, 2 per nonzero). None for
+    another factorisation package."""
+    pc = ksp.getPC()
+    if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
+        return None
+    F = pc.getFactorMatrix()
+    entries = F.getMumpsInfog(29)
+    entries = -1e6 * entries if entries < 0 else float(entries)      # MUMPS gives millions as negatives
+    nnz = ksp.getOperators()[0].getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
+    return F.getMumpsRinfog(3) / (FACTOR_FLOP_RATE * (2.0 * entries + 2.0 * nnz))
 
 
 class StepSolver:
