@@ -20,7 +20,7 @@ to the layer thickness (-pfault_queretaro_fault_size 7.142857, 50/7 m: elements 
 fault); ``iso-vert2``, ``iso-vert4``, ``iso-vert8``: iso's width with layers a half, a quarter and an eighth as thick
 (the top row of fault faces thinner at the same width); ``lat13-top0.9``, ``iso-top0.9``, ``lat5-top0.9``: the
 layers graded towards the land surface by -pfault_queretaro_surface_size 0.9 (1.8 m top rows at size factor 2,
-growing with depth to the layers' height) at widths 13, 50/7 and 5 m, ``iso-top1.8``, ``iso-top0.45``: iso with 3.6
+growing with depth to the layers' height) at widths 13, 50/7, 5, 3.5 and 2.5 m, ``iso-top1.8``, ``iso-top0.45``: iso with 3.6
 and 0.9 m top rows at size factor 2 (the scene's options; no patch). The initial state:
 ``litho``: the initial stress of flat layers (sigma_v = -rho g depth of each cell's own material, the scene's K0
 rule) instead of the elastic gravity solve's sigma_v, which beside the fault carries the soft sediment hung on the
@@ -66,6 +66,11 @@ VARIANTS = {
     "iso-top0.9": (["-pfault_queretaro_fault_size", "7.142857", "-pfault_queretaro_surface_size", "0.9"], {}),
     "iso-top1.8": (["-pfault_queretaro_fault_size", "7.142857", "-pfault_queretaro_surface_size", "1.8"], {}),
     "lat5-top0.9": (["-pfault_queretaro_fault_size", "5", "-pfault_queretaro_surface_size", "0.9"], {}),
+    "lat3.5-top0.9": (["-pfault_queretaro_fault_size", "3.5", "-pfault_queretaro_surface_size", "0.9"], {}),
+    "lat2.5-top0.9": (["-pfault_queretaro_fault_size", "2.5", "-pfault_queretaro_surface_size", "0.9"], {}),
+    # width and top rows halved together (28.6 / 14.3 / 7.1 m wide, 3.6 / 1.8 / 0.9 m rows at size factor 2)
+    "lat14.3-top1.8": (["-pfault_queretaro_fault_size", "14.285714", "-pfault_queretaro_surface_size", "1.8"], {}),
+    "lat3.6-top0.45": (["-pfault_queretaro_fault_size", "3.571429", "-pfault_queretaro_surface_size", "0.45"], {}),
     "iso-top0.45": (["-pfault_queretaro_fault_size", "7.142857", "-pfault_queretaro_surface_size", "0.45"], {}),
     "penalty": (["-pfault_fault_fault_method", "penalty"], {}),
     "k01": (["-pfault_geostatic_k0", "1"], {}),
@@ -81,7 +86,8 @@ STUDY = ([f"{v}-sf{f}" for v in ("base", "litho", "rockdry", "claydry", "dry500"
          + [f"{v}-sf{f}" for v in ("lat4", "vert4", "glued-lat4") for f in ("6", "4")]
          + [f"{v}-sf{f}" for v in ("penalty", "k01") for f in ("4", "2")]
          + ["base-sf1", "base-sf0.5", "iso-sf1.5", "iso-vert2-sf2", "iso-vert4-sf2", "iso-vert8-sf2"]
-         + [f"{v}-sf2" for v in ("lat13-top0.9", "iso-top1.8", "iso-top0.9", "iso-top0.45", "lat5-top0.9")])
+         + [f"{v}-sf2" for v in ("lat13-top0.9", "iso-top1.8", "iso-top0.9", "iso-top0.45", "lat5-top0.9",
+                                  "lat3.5-top0.9", "lat2.5-top0.9", "lat14.3-top1.8", "lat3.6-top0.45")])
 
 
 def run(name):
