@@ -18,6 +18,9 @@ tetrahedra (40 m: 4,100 at size factor 1, 60,000 at 0.35).
 --slab: the same x-z section as a slab one cell thick along the strike (its thickness the fault element
 size), the plane-strain reference of the 3-D block once ymin and ymax are rollers: every node lies on one of
 the two ends, so u_y = 0 everywhere. Element size --fault-size (m) on the fault, growing to 40 m 200 m from it.
+
+--dip, --depth, --clay, --fault-x and --length change the geometry (defaults: 40 degrees, 100 m, 30 m, 900 m,
+2000 m); --dip 90 makes the fault vertical (studies/queretaro_slab.py: Queretaro's section).
 """
 import argparse
 import math
@@ -69,7 +72,7 @@ def _name_surfaces(fault_top):
         x, y, z = gmsh.model.occ.getCenterOfMass(2, s)
         x0, y0, z0, x1, y1, z1 = gmsh.model.getBoundingBox(2, s)
         flat_x, flat_y, flat_z = x1 - x0 < tol, y1 - y0 < tol, z1 - z0 < tol
-        if flat_x:
+        if flat_x and (abs(x) < tol or abs(x - L) < tol):
             groups["xmin" if abs(x) < tol else "xmax"].append(s)
         elif flat_y:
             groups["ymin" if abs(y) < tol else "ymax"].append(s)
@@ -129,10 +132,11 @@ def build_slab(fault_size, fault_top=0.0, far_size=40.0, far_dist=200.0):
     gmsh.model.removeEntities([(1, c) for _, c in gmsh.model.getEntities(1) if c not in bounding], recursive=True)
     occ.rotate([(2, s) for s in surfs], 0, 0, 0, 1, 0, 0, math.pi / 2)
     occ.synchronize()
-    fault_curves = []
+    fault_curves = []        # the fault's (and the welded contact's) curves: not horizontal, not the sides
     for _, c in gmsh.model.getEntities(1):
         x0, _, z0, x1, _, z1 = gmsh.model.getBoundingBox(1, c)
-        if x1 - x0 > 1e-6 and z1 - z0 > 1e-6:
+        side = x1 - x0 < 1e-6 and (abs(x0) < 1e-6 or abs(x0 - L) < 1e-6)
+        if z1 - z0 > 1e-6 and not side:
             fault_curves.append(c)
     _size_field(fault_curves, 1, fault_size, max(far_size, fault_size), far_dist)
     gmsh.model.mesh.generate(2)
@@ -145,10 +149,16 @@ def build_slab(fault_size, fault_top=0.0, far_size=40.0, far_dist=200.0):
     gmsh.model.mesh.generate(3)
 
 
-def build(out, size_factor=1.0, slab=False, fault_size=2.0, fault_top=0.0, strike_length=None):
-    global W
+def build(out, size_factor=1.0, slab=False, fault_size=2.0, fault_top=0.0, strike_length=None, dip=None,
+          depth=None, clay=None, fault_x0=None, length=None):
+    global W, DIP, D, CLAY, X0, L
     if strike_length is not None:
         W = strike_length
+    DIP = DIP if dip is None else dip
+    D = D if depth is None else depth
+    CLAY = CLAY if clay is None else clay
+    X0 = X0 if fault_x0 is None else fault_x0
+    L = L if length is None else length
     gmsh.initialize(["faulted_aquifer_mesh"], readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
     try:
@@ -173,6 +183,12 @@ if __name__ == "__main__":
                     "it the rock-sediment contact is welded (physical surface contact, not split)")
     ap.add_argument("--strike-length", type=float, default=None, help="3-D: length of the block along the strike "
                     "(m, default 1000): a shorter block is the same plane-strain problem on fewer tetrahedra")
+    ap.add_argument("--dip", type=float, default=None, help="the fault's dip (degrees, default 40; 90: vertical)")
+    ap.add_argument("--depth", type=float, default=None, help="the block's depth (m, default 100)")
+    ap.add_argument("--clay", type=float, default=None, help="the clay's thickness in the hanging wall (m, default 30)")
+    ap.add_argument("--fault-x", type=float, default=None, help="x of the fault at the land surface (m, default 900)")
+    ap.add_argument("--length", type=float, default=None, help="the block's length across the fault (m, default 2000)")
     a = ap.parse_args()
-    n = build(a.out, a.size_factor, a.slab, a.fault_size, a.fault_top, a.strike_length)
+    n = build(a.out, a.size_factor, a.slab, a.fault_size, a.fault_top, a.strike_length, a.dip, a.depth, a.clay,
+              a.fault_x, a.length)
     print(f"{a.out}: {n} tetrahedra")
