@@ -231,3 +231,8 @@ def main():
     with open(os.path.join(RUNS, "table.md"), "w") as fh:
         fh.write(text + "\n")
     return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, ROOT)
+    sys.exit(main())
