@@ -21,6 +21,7 @@ from .effects import logged
 from .faults.breaking import exceeding
 from .faults.contact import OPEN, SLIP, STICK
 from .interrupt import StopRequest
+from .solver.policy import combined_cost
 
 INTEGRALS = ("slip_potency_m3", "open_volume_m3", "slipping_area_m2", "open_area_m2")    # per fault and step
 
@@ -147,11 +148,8 @@ def resolve_breaks(model: Any, state: Any, solver: Any, t: float, rec: dict) -> 
         rec["breaking_passes"] += 1
         rec["faces_broken_step"] += n
         again = solver.solve_step(t)
-        for key in ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians"):
-            rec[key] = rec.get(key, 0) + again.get(key, 0)
-        rec["residual_history"] = rec.get("residual_history", []) + again.get("residual_history", [])
+        rec.update(combined_cost([rec, again]))
         rec["converged"], rec["reason"] = again["converged"], again["reason"]
-        rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
         for key in ("stick", "slip", "open"):
             rec[key] = again[key]
 

@@ -49,11 +49,17 @@ def factorizations() -> int:
     return int(sum(event_total(name, "count") for name in ("MatLUFactorNum", "MatCholFctrNum")))
 
 
+def mumps_factors(pc: Any) -> Any:
+    """The factor matrix of ``pc`` if MUMPS factored it (LU or Cholesky), else None."""
+    if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
+        return None
+    return pc.getFactorMatrix()
+
+
 def mumps_null_pivots(pc: Any) -> int:
     """Null pivots MUMPS found and fixed in the factors of ``pc`` (INFOG(28); 0 for another factorisation)."""
-    if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
-        return 0
-    return int(pc.getFactorMatrix().getMumpsInfog(28))
+    F = mumps_factors(pc)
+    return 0 if F is None else int(F.getMumpsInfog(28))
 
 
 class FactorReuse:
@@ -136,10 +142,9 @@ def factorisation_cost(ksp: Any) -> float | None:
     (collective): its flops (RINFOG(3)) over ``FACTOR_FLOP_RATE`` times an iteration's flops (a forward and
     backward solve, 2 per entry of the factors, INFOG(29); a product with the operator, 2 per nonzero). None for
     another factorisation package."""
-    pc = ksp.getPC()
-    if pc.getType() not in ("lu", "cholesky") or pc.getFactorSolverType() != "mumps":
+    F = mumps_factors(ksp.getPC())
+    if F is None:
         return None
-    F = pc.getFactorMatrix()
     entries = F.getMumpsInfog(29)
     entries = -1e6 * entries if entries < 0 else float(entries)      # MUMPS gives millions as negatives
     nnz = ksp.getOperators()[0].getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
@@ -395,6 +400,19 @@ class StepSolver:
         self.F.destroy()
 
 
+COST_KEYS = ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians")
+
+
+def combined_cost(records: list[dict]) -> dict:
+    """The cost of one step solved in several solves (sub-steps, or solves again at its time after faces broke):
+    the records' iterations, wall time, factorisations and Jacobians summed, Krylov iterations per Newton
+    iteration over them, and their residual histories in order."""
+    out: dict = {key: sum(r.get(key, 0) for r in records) for key in COST_KEYS}
+    out["ksp_per_newton"] = out["ksp_its"] / out["newton_its"] if out["newton_its"] else 0.0
+    out["residual_history"] = [h for r in records for h in r.get("residual_history", [])]
+    return out
+
+
 def cut_step(solve_step: Callable[[float], dict], u: Any, t_prev: float, t: float, max_cuts: int,
              verbose: bool = False) -> dict:
     """Advance from t_prev to t with ``solve_step``. A step whose Newton solve does not converge is retried from
@@ -423,13 +441,9 @@ def cut_step(solve_step: Callable[[float], dict], u: Any, t_prev: float, t: floa
                     break
     finally:
         u0.destroy()
-    rec = dict(rec)
-    for key in ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians"):
-        rec[key] = sum(r.get(key, 0) for r in tried)
-    rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
+    rec = {**rec, **combined_cost(tried)}
     rec["time_s"] = float(t)
     rec["substeps"] = 2 ** cuts
-    rec["residual_history"] = [h for r in tried for h in r["residual_history"]]
     pivots = max(r.get("null_pivots", 0) for r in tried)
     if pivots:
         rec["null_pivots"] = pivots
