@@ -46,12 +46,11 @@ directory = os.path.join(os.path.dirname(sim.output.run_path), "checkpoints")
 if mpi.rank == 0:
     os.makedirs(directory, exist_ok=True)
 mpi.Barrier()
-faults = sim.model.faults
 ways = {"gathered": False}
 if parallel.available(comm):
     ways["parallel"] = True
-writers = {name: checkpoint.Writer(comm, sim.model.mesh, faces=None if faults is None else faults.faces.face,
-                                   n_faces=0 if faults is None else faults.faces.nf_total, parallel_io=p)
+writers = {name: checkpoint.Writer(comm, sim.model.mesh, faces=sim.model.faces.face, n_faces=sim.model.faces.total,
+                                   parallel_io=p)
            for name, p in ways.items()}
 times = {name: [] for name in ways}
 for _ in range(repeat):

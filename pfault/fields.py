@@ -9,7 +9,6 @@ fault faces, 3 dofs (normal, two tangential tractions) per fault face.
 from __future__ import annotations
 
 from dataclasses import dataclass
-
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -33,6 +32,15 @@ class DofMap:
     n_local: int
     fields: tuple
     max_sides: int = 2           # the most sides of any vertex on any rank, at least 2 (output columns)
+
+    def field_mask(self, name: str) -> np.ndarray:
+        """Boolean mask of this rank's local dofs of the field ``name`` (DISPLACEMENT: the vertices' dofs, every
+        side; LAGRANGE: the cells' multipliers)."""
+        n = 3 * self.vert_sides
+        vertex = np.zeros(self.n_local, dtype=bool)
+        within = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+        vertex[np.repeat(self.vert_offset, n) + within] = True
+        return vertex if name == DISPLACEMENT else ~vertex
 
     def vertex_dofs(self, side: int = 0) -> np.ndarray:
         """(nv, 3) local dofs of the given side (falls back to side 0 where a vertex has fewer sides)."""
@@ -86,3 +94,25 @@ def build(mesh: LocalMesh, vert_sides: np.ndarray | None = None, cell_side: np.n
     return DofMap(section=sec, vert_offset=vert_offset, vert_sides=vert_sides, cell_offset=cell_offset,
                   cell_dofs=cell_dofs, n_local=int(counts.sum()), fields=fields,
                   max_sides=max(2, dm.getComm().tompi4py().allreduce(int(vert_sides.max(initial=1)), op=MPI.MAX)))
+
+
+@dataclass(frozen=True)
+class FaceRows:
+    """The fault faces this rank owns (those whose minus cell it has: the cell that carries the face's multipliers),
+    in serial order: their serial ids ``face``, local multiplier dofs ``lm_dofs`` (nf, 3: the minus cell's 3 per fault
+    face it is the minus cell of, in local-face order); ``total``: the fault faces of the whole mesh (0 without
+    faults)."""
+    face: np.ndarray
+    lm_dofs: np.ndarray
+    total: int
+
+
+def face_rows(mesh: LocalMesh, dofmap: DofMap, total: int) -> FaceRows:
+    cells, lfaces = np.nonzero(mesh.cell_fault_face >= 0)
+    fid = mesh.cell_fault_face[cells, lfaces]
+    order = np.argsort(fid)
+    cell, lface = cells[order], lfaces[order]
+    at = mesh.cell_fault_face[cell] >= 0
+    slot = (at & (np.arange(4)[None, :] < lface[:, None])).sum(axis=1)
+    lm = dofmap.cell_offset[cell][:, None] + 3 * slot[:, None] + np.arange(3)
+    return FaceRows(fid[order].astype(np.int64), lm.reshape(-1, 3), int(total))

@@ -25,6 +25,11 @@ from .mesh import distributed
 from .solver.equations import Equations, constrained_local
 from .solver.choice import AUTO, ITERATIVE_FROM_DOFS, solver_file_name
 from .sources import FlowSource, TableSource
+from .faults.bubbles import CellBubbles
+from .faults.faces import FaultFaces
+from .faults.history import face_pressure
+from .faults.term import FaultTerm, fault_topology
+from .mesh.fault import split_faults
 from .sources.heads import build_heads_source, check_heads_files, read_heads_settings, read_mesh_origin
 
 
@@ -51,8 +56,9 @@ class Scene:
 @dataclass(frozen=True)
 class Model:
     """A run's model. ``serial`` and ``split`` (the serial mesh and its fault split) are held by rank 0 only;
-    ``faults`` is the fault interface (None without faults), ``fault_id`` the fault of every fault face (serial
-    order; None without faults), ``source`` the pore-pressure source, ``equations`` the discrete problem,
+    ``fault_id`` the fault of every fault face (serial order; empty without faults), ``faces`` the fault faces this
+    rank owns (pfault.fields.FaceRows), ``source`` the pore-pressure
+    source, ``equations`` the discrete problem with its terms (a fault interface: ``equations.terms``),
     ``solver_file`` the solver options file applied (None: none); ``properties`` the materials' properties per
     local cell (pfault.properties.CellProperties)."""
     comm: Any
@@ -64,7 +70,7 @@ class Model:
     properties: Any
     assembler: Any
     fault_id: Any
-    faults: Any
+    faces: Any
     source: Any
     equations: Any
     solver_file: str | None
@@ -170,8 +176,6 @@ def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
     split = topology = None
     fault_names = [f.name for f in scene.fault_settings]
     if fault_names:
-        from .faults.interface import fault_topology
-        from .mesh.fault import split_faults
         split = split_faults(serial, fault_names)
         cell = properties.CellProperties.of_cells(scene.materials, serial.cell_material, serial_values)
         topology = fault_topology(serial, split, cell.young_modulus)
@@ -221,6 +225,23 @@ def _apply_solver(scene: Scene, mesh: Any, options_file: str) -> str | None:
     return apply_solver_file(name, options_file)
 
 
+def fault_terms(scene: Scene, mesh: Any, dofmap: Any, assembler: Any, cell_props: Any, topology: Any) -> tuple:
+    """The terms the scene's faults give the equations: one fault interface for all of them (pfault.faults.term),
+    none without faults."""
+    if not scene.effects.faults:
+        return ()
+    with logged("pfaultFaultSetup"):
+        fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
+        faces = FaultFaces(mesh, dofmap, scene.fault_settings, topology.fault_id, cell_props.young_modulus, fixed,
+                           lgmap)
+        bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, dofmap.cell_dofs, fixed,
+                              (assembler.grad, assembler.vol, assembler.lam, assembler.mu), faces.area,
+                              faces.R, lgmap.apply, PETSc.IntType)
+        face_z = mesh.coords[faces.verts][:, :, 2].mean(axis=1)
+        pressure = face_pressure(scene.contact, scene.settings, face_z, faces.cell, assembler.alpha)
+        return (FaultTerm(faces, scene.fault_settings, topology, bubbles, pressure),)
+
+
 def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     """The model of the scene in ``options_file`` (with the command line's options, through ``reader``)."""
     t0 = time.perf_counter()
@@ -245,28 +266,16 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     t0 = time.perf_counter()
     stage = PETSc.Log.Stage("Setup")
     stage.push()
-    fault_id = topology.fault_id if topology is not None else None
+    fault_id = topology.fault_id if topology is not None else np.zeros(0, np.int64)
     dofmap = _dofmap(scene, mesh)
+    faces = fields.face_rows(mesh, dofmap, len(fault_id))
     solver_file = _apply_solver(scene, mesh, options_file)
     source = None
     try:
         assembler = ElasticAssembler(mesh, dofmap, cell_props)
         source = _source(scene, mesh, cell_props, serial_values)
-        faults = None
-        if scene.effects.faults:
-            from .faults.bubbles import CellBubbles
-            from .faults.faces import FaultFaces
-            from .faults.interface import FaultInterface
-            with logged("pfaultFaultSetup"):
-                fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
-                faces = FaultFaces(mesh, dofmap, scene.fault_settings, fault_id, cell_props.young_modulus, fixed,
-                                   lgmap)
-                bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, dofmap.cell_dofs, fixed,
-                                      (assembler.grad, assembler.vol, assembler.lam, assembler.mu), faces.area,
-                                      faces.R, lgmap.apply, PETSc.IntType)
-                faults = FaultInterface(faces, scene.fault_settings, topology, scene.contact, bubbles)
-        equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, faults,
-                              scene.contact)
+        terms = fault_terms(scene, mesh, dofmap, assembler, cell_props, topology)
+        equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, terms)
     except BaseException:
         # destroyed here, on every rank at once (the error is every rank's): left to the garbage collector,
         # which may free them on some ranks only, PETSc 3.18's PetscFinalize waits for ever
@@ -279,5 +288,5 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
         raise
     stage.pop()
     wall["setup"] = time.perf_counter() - t0
-    return Model(comm, scene, serial, split, mesh, dofmap, cell_props, assembler, fault_id, faults, source, equations,
+    return Model(comm, scene, serial, split, mesh, dofmap, cell_props, assembler, fault_id, faces, source, equations,
                  solver_file, wall)

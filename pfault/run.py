@@ -1,16 +1,15 @@
-"""The time loop: advance the pore-pressure source, solve the step, hand its result to the observers.
+"""The time loop: advance the pore-pressure source, solve the step, measure it, hand the result to the observers.
 
-An observer has ``step_started(step, t)`` (before the step is solved) and ``step_done(result)`` (a
-``StepResult``, once it is solved and measured); each reads the result, none changes the state or the step's
-record. A step on a fault with candidate surfaces ends once no intact face exceeds its strength
-(``resolve_breaks``). The output observers may derive figures from a step (the land surface's hazard maxima) into
-``result.derived``, which the observers after them (checkpoint, summary) carry with the record.
+``Stepper`` solves a step (the policy's solve, then the terms' settling: a fault's faces that broke, solved again
+at the same load until none does), commits the terms' histories and measures the converged state into a typed
+record (pfault.records.StepRecord). An observer has ``step_started(step, t)`` (before the step is solved) and
+``step_done(result)`` (a ``StepResult``); each reads the result, none changes it or the state.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -18,29 +17,24 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .effects import logged
-from .faults.breaking import exceeding
-from .faults.contact import OPEN, SLIP, STICK
+from .initial import GeostaticStart
 from .interrupt import StopRequest
-from .solver.policy import combined_cost
+from .records import Solve, SolveCost, StepRecord
+from .surface import LandSurface, SurfaceStep
 
-INTEGRALS = ("slip_potency_m3", "open_volume_m3", "slipping_area_m2", "open_area_m2")    # per fault and step
 
-
-@dataclass
+@dataclass(frozen=True)
 class StepResult:
-    """A completed step: its number and time, the solver's record with the step's measured figures, the
-    displacement relative to the initial state (local array), whether its fields are written (``output``),
-    the stop signal agreed after it (or None), and the figures the output observers derived from it."""
+    """A completed step: its number and time, its record, the displacement relative to the initial state (local
+    array), whether its fields are written (``output``), the stop signal agreed after it (or None), and the land
+    surface's step (rank 0, output steps with a land surface; None otherwise)."""
     step: int
     t: float
-    record: dict
-    u_rel: np.ndarray | None
+    record: StepRecord
+    u_rel: np.ndarray
     output: bool = False
     stop: str | None = None
-    derived: dict = field(default_factory=dict)
-
-    def full_record(self) -> dict:
-        return {**self.record, **self.derived}
+    surface: SurfaceStep | None = None
 
 
 def surface_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
@@ -58,102 +52,6 @@ def surface_figures(model: Any, u_rel: np.ndarray) -> tuple[float, float]:
     return mpi.allreduce(sub, op=MPI.MAX), mpi.allreduce(hor, op=MPI.MAX)
 
 
-def broken_figures(model: Any, broken: np.ndarray, break_time: np.ndarray) -> np.ndarray:
-    """Per fault (rows in the order of the scene's faults): faces broken, their area (m^2), the depth of the
-    deepest broken point below the land surface (m: below its highest point; the built-in scenes' land surfaces
-    are flat), the length of the broken part's trace on the land surface (m: the broken faces' edges whose two
-    vertices are on it) and the first break time (s, NaN if none broke in the run). Collective."""
-    faces, mesh = model.faults.faces, model.mesh
-    mpi = model.comm.tompi4py()
-    ground = mesh.vert_data[:, 1] == 1
-    top = mpi.allreduce(float(np.max(mesh.coords[ground, 2], initial=-np.inf)), op=MPI.MAX)
-    nfaults = len(model.scene.fault_settings)
-    xyz = mesh.coords[faces.verts]                                     # (nf, 3 vertices, 3)
-    depth = np.where(broken, top - xyz[:, :, 2].min(axis=1), 0.0) if np.isfinite(top) else np.zeros(len(broken))
-    on = ground[faces.verts]
-    edges = [(0, 1), (1, 2), (2, 0)]
-    trace = sum(np.where(on[:, a] & on[:, b], np.linalg.norm(xyz[:, a] - xyz[:, b], axis=1), 0.0)
-                for a, b in edges) if len(broken) else np.zeros(0)
-    sums = np.zeros((nfaults, 3))
-    np.add.at(sums, faces.fault, np.column_stack([broken, faces.area * broken, trace * broken]))
-    mx = np.full((nfaults, 2), -np.inf)
-    np.fmax.at(mx, faces.fault, np.column_stack([depth, -np.where(broken, break_time, np.nan)]))   # NaN: none
-    mpi.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-    mpi.Allreduce(MPI.IN_PLACE, mx, op=MPI.MAX)
-    first = np.where(np.isfinite(mx[:, 1]), -mx[:, 1], np.nan)
-    return np.column_stack([sums[:, 0], sums[:, 1], np.maximum(mx[:, 0], 0.0), sums[:, 2], first])
-
-
-def fault_figures(model: Any, states: np.ndarray, slid: np.ndarray, u_rel: np.ndarray,
-                  broken: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
-    """Per fault (by name): how many faces are stuck, slipping and open (``states``: each owned face's, as
-    reported), the largest opening of its open faces and the largest slip of its faces that have slid
-    (``slid``: slipping or open at the end of a completed step, now or before), 0 where there are none; and
-    the largest of these over the faults. The jumps are the face-mean jumps (with the bubbles' part) relative
-    to the initial state; a closed face's opening and a stuck face's slip increment are zero to the solver's
-    tolerance, and are not counted here (fault.h5 has every face's jump). The integrals over each fault, which
-    converge under refinement where a largest value may not (it sits at a singular point: a fault's tip, its
-    foot on a fixed boundary): the slip potency (m^3, the area integral of the slip of the faces that have slid),
-    the open volume (m^3, of the opening of the open faces) and the slipping and open areas (m^2). ``broken``: each
-    owned face's broken flag and break time, whose figures (``broken_figures``) join each fault's as
-    ``faces_broken``, ``broken_area_m2``, ``broken_depth_m``, ``broken_length_m`` and ``first_break_time_s`` (None
-    if none broke in the run)."""
-    faces = model.faults.faces
-    names = [f.name for f in model.scene.fault_settings]
-    gl = model.faults.relative_jumps(u_rel)[1]     # face-mean jumps with the bubbles' part
-    opening = np.where(states == OPEN, gl[:, 0], 0.0)
-    slip = np.where(slid, np.linalg.norm(gl[:, 1:], axis=1), 0.0)
-    counts = np.zeros((len(names), 3), dtype=np.int64)
-    np.add.at(counts, (faces.fault, states), 1)
-    largest = np.zeros((len(names), 2))
-    np.maximum.at(largest, faces.fault, np.column_stack([opening, slip]))
-    a = faces.area
-    integrals = np.zeros((len(names), 4))
-    np.add.at(integrals, faces.fault, np.column_stack([a * slip, a * opening, a * (states == SLIP),
-                                                       a * (states == OPEN)]))
-    mpi = model.comm.tompi4py()
-    mpi.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
-    mpi.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
-    mpi.Allreduce(MPI.IN_PLACE, integrals, op=MPI.SUM)
-    per = {name: {"faces_stuck": int(c[STICK]), "faces_slipping": int(c[SLIP]), "faces_open": int(c[OPEN]),
-                  "max_opening_m": float(m[0]), "max_slip_m": float(m[1]),
-                  **dict(zip(INTEGRALS, (float(v) for v in i)))}
-           for name, c, m, i in zip(names, counts, largest, integrals)}
-    if broken is not None:
-        for (name, p), b in zip(per.items(), broken_figures(model, *broken)):
-            p.update({"faces_broken": int(b[0]), "broken_area_m2": float(b[1]), "broken_depth_m": float(b[2]),
-                      "broken_length_m": float(b[3]),
-                      "first_break_time_s": float(b[4]) if np.isfinite(b[4]) else None})
-    return {"max_fault_opening_m": float(largest[:, 0].max(initial=0.0)),
-            "max_fault_slip_m": float(largest[:, 1].max(initial=0.0)), "faults": per}
-
-
-def resolve_breaks(model: Any, state: Any, solver: Any, t: float, rec: dict) -> None:
-    """The fracture front of a converged step at time t: break every intact face whose traction exceeds its
-    strength (pfault.faults.breaking), solve again at the same load, and repeat until none does (a failure
-    redistributes load onto its neighbours, which may fail at the same load). Adds to the step's record the
-    passes (``breaking_passes``: solves after the first) and the faces broken in the step (``faces_broken_step``),
-    and the passes' iterations to its own. Collective; the broken set depends on each face's traction only."""
-    faults, mpi = model.faults, model.comm.tompi4py()
-    rec["breaking_passes"], rec["faces_broken_step"] = 0, 0
-    if not any(f.candidate for f in model.scene.fault_settings):
-        return
-    while rec["converged"]:
-        t_eff = faults.effective(faults.tractions(model.equations.local_array(state.u)))
-        new = exceeding(faults.strength, t_eff, state.fault_broken)
-        n = mpi.allreduce(int(np.count_nonzero(new)), op=MPI.SUM)
-        if n == 0:
-            break
-        state.break_faces(new, t)
-        rec["breaking_passes"] += 1
-        rec["faces_broken_step"] += n
-        again = solver.solve_step(t)
-        rec.update(combined_cost([rec, again]))
-        rec["converged"], rec["reason"] = again["converged"], again["reason"]
-        for key in ("stick", "slip", "open"):
-            rec[key] = again[key]
-
-
 def relative_displacement(model: Any, state: Any) -> np.ndarray:
     """u - u_ref as a local array."""
     du = state.u.duplicate()
@@ -164,35 +62,92 @@ def relative_displacement(model: Any, state: Any) -> np.ndarray:
     return loc
 
 
-def initial_state(model: Any, state: Any, solver: Any, wall: dict) -> list[dict]:
-    """The geostatic initial equilibrium (step 0), when the scene asks for one; returns its step records."""
-    if not model.settings.geostatic:
-        return []
-    stage = PETSc.Log.Stage("Solve")
-    stage.push()
-    t0 = time.perf_counter()
-    with logged("pfaultGeostatic"):
-        solver.geostatic()
-    state.u.copy(state.u_ref)
-    rec = {"time_s": 0.0, "newton_its": 0, "ksp_its": 0, "wall_s": time.perf_counter() - t0,
-           "converged": True, "initial": True, "step": 0}
-    if model.faults is not None:
-        loc = model.equations.local_array(state.u)
-        rec.update(model.faults.counts_by_state(loc))
-        with model.faults.bubbles.unloaded():       # the initial state's own jumps: zero relative to itself
-            rec.update(fault_figures(model, model.faults.states(loc), state.fault_slid, np.zeros_like(loc),
-                                     (state.fault_broken, state.fault_break_time)))
-    stage.pop()
-    wall["solve"] += rec["wall_s"]
-    return [rec]
+def per_side(model: Any, u_rel: np.ndarray) -> np.ndarray:
+    """The displacement of every local vertex, its sides (pieces) in order, side 0 repeated where a vertex has
+    fewer (nv, 3 * max sides)."""
+    dofmap = model.dofmap
+    return np.concatenate([u_rel[dofmap.vertex_dofs(side)] for side in range(dofmap.max_sides)], axis=1)
 
 
-def time_loop(model: Any, state: Any, solver: Any, observers: list, times: np.ndarray, first: int, offset: int,
-              records: list, wall: dict, after_first_solve: Callable[[], None]) -> tuple[bool, str | None]:
+class Stepper:
+    """Solves and measures the steps of ``model`` from ``state`` with ``solver`` (pfault.solver.policy.StepSolver);
+    ``surface``: the land surface measured at output steps."""
+
+    def __init__(self, model: Any, state: Any, solver: Any, surface: LandSurface) -> None:
+        self.model, self.state, self.solver, self.surface = model, state, solver, surface
+        self.eq = model.equations
+
+    def terms_measures(self, x_loc: np.ndarray, x_rel: np.ndarray, at_rest: bool = False) -> dict:
+        """The terms' figures for the record (collective); ``at_rest``: under the loads of the initial state."""
+        out: dict = {}
+        for term, load, h in zip(self.eq.terms, self.eq.loads.term_loads, self.state.histories):
+            out.update(term.measures(x_loc, x_rel, term.at_rest(load) if at_rest else load, h, self.model.mesh))
+        return out
+
+    def initial(self) -> StepRecord:
+        """The geostatic initial equilibrium (step 0): its record."""
+        t0 = time.perf_counter()
+        with logged("pfaultGeostatic"):
+            GeostaticStart(self.eq, self.model.settings).compute(self.state, self.solver.solve_linear)
+        loc = self.eq.local_array(self.state.u)
+        counts = {}
+        if self.eq.terms:
+            config = np.concatenate(self.eq.configuration(self.state.u, self.state.histories, exact=False))
+            c = self.model.comm.tompi4py().allreduce(np.bincount(config, minlength=3), op=MPI.SUM)
+            counts = {"stick": int(c[0]), "slip": int(c[1]), "open": int(c[2])}
+        terms = self.terms_measures(loc, np.zeros_like(loc), at_rest=True)    # its own jumps: zero
+        solve = Solve(0.0, True, 0, SolveCost(wall_s=time.perf_counter() - t0), counts=counts)
+        return StepRecord(0, solve, terms=terms, initial=True)
+
+    def settle(self, t: float, solve: Solve) -> Solve:
+        """After a converged solve at t: the terms settle (a fault's faces whose traction exceeds their strength
+        break, pfault.faults.breaking), and the step is solved again at the same load until none does (a
+        failure redistributes load onto its neighbours, which may fail at the same load). The broken set depends
+        on each face's traction only."""
+        eq, state = self.eq, self.state
+        passes = changed = 0
+        while solve.converged:
+            x_loc = eq.local_array(state.u)
+            settled = [term.settle(x_loc, load, h, t)
+                       for term, load, h in zip(eq.terms, eq.loads.term_loads, state.histories)]
+            n = sum(k for _, k in settled)
+            if n == 0:
+                break
+            state.histories = tuple(h for h, _ in settled)
+            passes, changed = passes + 1, changed + n
+            solve = solve.then(self.solver.solve_step(t))
+        return replace(solve, breaking=(passes, changed)) if eq.terms else solve
+
+    def solve(self, t_prev: float, t: float) -> Solve:
+        """Solve the step from t_prev to t (the source advanced to t) and settle the terms; a converged step
+        commits the terms' histories (a fault's faces slipping or open now have slid)."""
+        eq, state = self.eq, self.state
+        solve = self.settle(t, self.solver.solve_interval(t_prev, t, self.model.settings.max_cuts))
+        if solve.converged and eq.terms:
+            x_loc = eq.local_array(state.u)
+            state.histories = tuple(term.commit(x_loc, load, h)
+                                    for term, load, h in zip(eq.terms, eq.loads.term_loads, state.histories))
+        return solve
+
+    def measure(self, step: int, solve: Solve, source: dict, due: bool
+                ) -> tuple[StepRecord, np.ndarray, SurfaceStep | None]:
+        """The record of the solved step (``source``: the pore-pressure source's figures), the displacement
+        relative to the initial state and, on an output step (``due``), the land surface's step."""
+        model = self.model
+        u_rel = relative_displacement(model, self.state)
+        sub, hor = surface_figures(model, u_rel)
+        terms = self.terms_measures(self.eq.local_array(self.state.u), u_rel)
+        hazard, surface = self.surface.measure(per_side(model, u_rel)) if due else ({}, None)
+        return StepRecord(step, solve, sub, hor, hazard or {}, terms, source), u_rel, surface
+
+
+def time_loop(stepper: Stepper, observers: list, times: np.ndarray, first: int, offset: int, records: list,
+              wall: dict, after_first_solve: Callable[[], None]) -> tuple[bool, str | None]:
     """Steps first+1 .. len(times)-1 of the time grid ``times`` (step number = grid index + ``offset``), each
-    record appended to ``records``; ``after_first_solve`` is called once the first step is solved (every
+    record's JSON appended to ``records``; ``after_first_solve`` is called once the first step is solved (every
     solver option has been read by then). Returns (every step converged, the stop signal or None)."""
-    s = model.settings
+    model = stepper.model
+    every = model.settings.output_every
     solve_stage, out_stage = PETSc.Log.Stage("Solve"), PETSc.Log.Stage("Output")
     converged, stop = True, None
     with StopRequest(model.comm) as request:       # after meshing: gmsh resets the SIGINT handler
@@ -202,35 +157,23 @@ def time_loop(model: Any, state: Any, solver: Any, observers: list, times: np.nd
                 obs.step_started(step, t)
             solve_stage.push()
             model.source.advance_to(t)
-            rec = solver.solve_interval(times[index - 1], t, s.max_cuts)
-            if model.faults is not None:
-                resolve_breaks(model, state, solver, t, rec)
-            rec.update(model.source.step_record())
+            solve = stepper.solve(float(times[index - 1]), t)
+            source = model.source.step_record()
             solve_stage.pop()
-            rec["step"] = step
             after_first_solve()
-            wall["solve"] += rec["wall_s"]
-            u_rel = relative_displacement(model, state)
-            rec["max_subsidence_m"], rec["max_horizontal_displacement_m"] = surface_figures(model, u_rel)
-            if model.faults is not None:
-                states = model.faults.states(model.equations.local_array(state.u))
-                if rec["converged"]:
-                    state.fault_slid |= states != STICK
-                rec.update(fault_figures(model, states, state.fault_slid, u_rel,
-                                         (state.fault_broken, state.fault_break_time)))
-            records.append(rec)
+            wall["solve"] += solve.cost.wall_s
             stop = request.agreed()
-            due = index % s.output_every == 0 or index == len(times) - 1 or not rec["converged"] or stop is not None
-            result = StepResult(step, t, rec, u_rel, output=due, stop=stop)
+            due = index % every == 0 or index == len(times) - 1 or not solve.converged or stop is not None
+            record, u_rel, surface = stepper.measure(step, solve, source, due)
+            records.append(record.as_json())
+            result = StepResult(step, t, record, u_rel, output=due, stop=stop, surface=surface)
             t0 = time.perf_counter()
             out_stage.push()
             for obs in observers:
                 obs.step_done(result)
-                if result.derived:
-                    records[-1] = result.full_record()      # the checkpoint and summary carry them
             out_stage.pop()
             wall["output"] += time.perf_counter() - t0
-            if not rec["converged"]:
+            if not solve.converged:
                 converged = False
                 break
             if stop is not None:

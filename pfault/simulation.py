@@ -18,8 +18,10 @@ from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLi
                            format_time, progress_line)
 from .model import Model, build_model
 from .options import OptionReader, check_unused_petsc_options
+from .io import checkpoint
 from .solver.policy import StepSolver
 from .state import State
+from .surface import LandSurface
 
 
 class Simulation:
@@ -52,7 +54,10 @@ class Simulation:
         self.state: State = state
         self.solver: StepSolver = solver
         restart_step = None if self.resumed is None else self.resumed[1] + self.resumed[2]
-        self.output = RunOutput(self.model, state, self.argv, self.model.scene.restart_dir, restart_step)
+        self.surface = LandSurface(self.model)
+        self.stepper = loop.Stepper(self.model, state, solver, self.surface)
+        self.output = RunOutput(self.model, state, self.argv, self.surface, self.model.scene.restart_dir,
+                                restart_step)
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
 
     @property
@@ -63,7 +68,7 @@ class Simulation:
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Setup")
         stage.push()
-        state = State(m.equations.create_vec(), m.faults, m.source)
+        state = State(m.equations.create_vec(), m.equations.initial_histories())
         contact = m.scene.contact
         try:
             solver = StepSolver(m.equations, state, geostatic=m.settings.geostatic,
@@ -82,14 +87,27 @@ class Simulation:
         if self.resumed is not None:
             records, first, offset = self.resumed
         else:
-            records, first, offset = loop.initial_state(m, self.state, self.solver, self.wall), 0, 0
-            for rec in records:
-                PETSc.Sys.Print(progress_line(0, rec))
+            records, first, offset = self._initial_state(), 0, 0
         self.costs.mark_setup()
-        converged, stop = loop.time_loop(m, self.state, self.solver, self.observers(self.output, records),
-                                         self.times, first, offset, records, self.wall, self._open_output)
+        converged, stop = loop.time_loop(self.stepper, self.observers(self.output, records), self.times, first,
+                                         offset, records, self.wall, self._open_output)
         self.output.close()
         return self.composer.compose(records, converged, stop)
+
+    def _initial_state(self) -> list[dict]:
+        """The geostatic initial equilibrium (step 0), when the scene asks for one, and the output step of the
+        initial state; returns the initial step records' JSON."""
+        records = []
+        if self.settings.geostatic:
+            stage = PETSc.Log.Stage("Solve")
+            stage.push()
+            rec = self.stepper.initial()
+            stage.pop()
+            self.wall["solve"] += rec.solve.cost.wall_s
+            records.append(rec.as_json())
+            PETSc.Sys.Print(progress_line(0, records[-1]))
+        self.output.capture_initial()
+        return records
 
     def observers(self, output: RunOutput, records: list) -> list[Observer]:
         """The observers of every step, in the order they see it: the progress line, the fields, the stations and
@@ -115,7 +133,6 @@ class Simulation:
     def _restart(self, state: State) -> tuple[list, int, int]:
         """Restore ``state`` from the checkpoint of the run in -pfault_restart: returns its step records, the
         grid index of its time and its step number minus that index."""
-        from .io import checkpoint
         times = self.times
         restart_dir = self.model.scene.restart_dir
         attrs, records = checkpoint.load(self.comm, restart_dir, self.model, state)

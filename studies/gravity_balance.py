@@ -23,14 +23,11 @@ from pfault.solver.equations import constrained_local  # noqa: E402
 
 def main() -> None:
     sim = Simulation(sys.argv[1], sys.argv)
-    eq, faults = sim.model.equations, sim.model.faults
+    eq = sim.model.equations
     asm, dofmap = eq.asm, eq.dofmap
     eq.loads.gravity(eq.loads.f)
     ug = sim.state.u.duplicate()
-    ksp = sim.solver.snes.getKSP()
-    A = eq.glued_operator()
-    ksp.setOperators(A, A)
-    ksp.solve(eq.loads.f, ug)
+    sim.solver.solve_linear(eq.initial_operator(), eq.loads.f, ug)
     u = eq.local_array(ug)
     ug.destroy()
     grav = np.zeros(dofmap.n_local)
@@ -39,9 +36,9 @@ def main() -> None:
     split = dofmap.vert_sides > 1
     for side in (0, 1):
         ok[dofmap.vertex_dofs(side)[split].ravel()] = False
-    if faults is not None:
-        ok[faults.faces.lm_dofs.ravel()] = False
-    for name, sig in (("P1 part", asm.effective_stress(u)), ("with the bubbles", eq.effective_stress(u))):
+    ok[sim.model.faces.lm_dofs.ravel()] = False
+    for name, sig in (("P1 part", asm.effective_stress(u)),
+                      ("with the bubbles", eq.effective_stress(u, sim.state.histories))):
         fe = el.stress_divergence_force(asm.grad, asm.vol, sig)
         r, mag = np.zeros(dofmap.n_local), np.zeros(dofmap.n_local)
         asm.scatter_cell_forces(fe, r)

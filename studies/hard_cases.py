@@ -566,8 +566,7 @@ def _faces_per_rank_main(argv):
     from pfault.simulation import Simulation
     sim = Simulation(scene, [scene] + rest)
     try:
-        faces = sim.model.faults.faces
-        counts = [int(c) for c in faces.mpi.allgather(faces.nf)]
+        counts = [int(c) for c in PETSc.COMM_WORLD.tompi4py().allgather(len(sim.model.faces.face))]
     finally:
         sim.destroy()
     if PETSc.COMM_WORLD.rank == 0:

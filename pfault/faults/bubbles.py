@@ -19,8 +19,7 @@ pfault.mesh.serial.TET_FACES) of each of the cell's fault faces, -1 for an empty
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 from math import factorial
 
@@ -173,6 +172,14 @@ def body_bubble_load(vol: np.ndarray, b: np.ndarray, lface: np.ndarray) -> np.nd
     return f.reshape(len(vol), 3 * lface.shape[1])
 
 
+@dataclass(frozen=True)
+class BubbleLoad:
+    """A load on the bubbles of a rank's enriched cells: ``fb`` (ne, 3m) and its part of each slot's A g,
+    ``g_load`` (ne, m, 3) (``CellBubbles.load``)."""
+    fb: np.ndarray
+    g_load: np.ndarray
+
+
 class CellBubbles:
     """The bubbles of the cells on both sides of a rank's fault faces, condensed: what they add to the
     cells' stiffness, to the faces' mean jumps, to the displacement rows and to the Jacobian, in the rank's local
@@ -210,8 +217,6 @@ class CellBubbles:
         self.dofs = cell_dofs[c]
         self.free = ~fixed[self.dofs]
         self.nf = len(area)
-        self.fb = np.zeros((ne, 3 * m))                 # the bubbles' load of the time last set
-        self.g_load = np.zeros((ne, m, 3))              # its part of each slot's A g
         self._grad, self._vol = grad[c], vol[c]
         self._to_global, self._int = to_global, index_type
 
@@ -231,12 +236,17 @@ class CellBubbles:
         return self.dofs, self.cond.stiffness()
 
     # -- loads -----------------------------------------------------------------------------------
-    def set_load(self, fb: np.ndarray, out: np.ndarray) -> None:
-        """Take fb (ne, 3m) as the bubbles' load: keep its part of the faces' jumps and add the condensed
-        displacement load -K_ub K_bb^-1 fb to the local array ``out`` (free dofs)."""
-        self.fb = fb
-        fu, self.g_load = self.cond.load_of(fb)
+    def zero_load(self) -> BubbleLoad:
+        """No load on the bubbles (the initial state's, which loads nothing)."""
+        ne, m = self.face.shape
+        return BubbleLoad(np.zeros((ne, 3 * m)), np.zeros((ne, m, 3)))
+
+    def load(self, fb: np.ndarray, out: np.ndarray) -> BubbleLoad:
+        """The bubbles' load fb (ne, 3m), with its part of the faces' jumps; adds its condensed displacement load
+        -K_ub K_bb^-1 fb to the local array ``out`` (free dofs)."""
+        fu, g_load = self.cond.load_of(fb)
         out += np.bincount(self.dofs.ravel(), weights=(fu * self.free).ravel(), minlength=len(out))
+        return BubbleLoad(fb, g_load)
 
     def pore_pressure_load(self, alpha_dp: np.ndarray) -> np.ndarray:
         """Bubble load of the Biot term for alpha dp per local cell."""
@@ -246,29 +256,19 @@ class CellBubbles:
         """Bubble load of body forces b (nc, 3) per local cell."""
         return body_bubble_load(self._vol, b[self.cell], self.lface)
 
-    @contextmanager
-    def unloaded(self) -> Iterator[None]:
-        """Within: the bubbles without load (the initial state's, which loads nothing)."""
-        saved = self.fb, self.g_load
-        self.fb, self.g_load = np.zeros_like(saved[0]), np.zeros_like(saved[1])
-        try:
-            yield
-        finally:
-            self.fb, self.g_load = saved
-
-    def jump_of_load(self) -> np.ndarray:
+    def jump_of_load(self, load: BubbleLoad) -> np.ndarray:
         """The load's part of each face's A g (nf, 3; local frame)."""
         out = np.zeros((self.nf, 3))
-        np.add.at(out, self.face[self.valid], self.g_load[self.valid])
+        np.add.at(out, self.face[self.valid], load.g_load[self.valid])
         return out
 
     # -- residual ----------------------------------------------------------------------------------
-    def jump(self, u_loc: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    def jump(self, u_loc: np.ndarray, dt: np.ndarray, load: BubbleLoad) -> np.ndarray:
         """The bubbles' part of A g (nf, 3; local frame, zero on faces without bubbles) at displacements u_loc and
-        tractions' changes dt (nf, 3) since the initial state."""
+        tractions' changes dt (nf, 3) since the initial state, under ``load``."""
         ue = u_loc[self.dofs]
         dts = dt[np.maximum(self.face, 0)] * self.valid[:, :, None]            # (ne, m, 3)
-        ag = (np.einsum("nsik,nk->nsi", self.N, ue) + np.einsum("nsrij,nrj->nsi", self.M, dts) + self.g_load)
+        ag = (np.einsum("nsik,nk->nsi", self.N, ue) + np.einsum("nsrij,nrj->nsi", self.M, dts) + load.g_load)
         out = np.zeros((self.nf, 3))
         v = self.valid
         np.add.at(out, self.face[v], ag[v])
@@ -281,16 +281,16 @@ class CellBubbles:
         fu = np.einsum("nsik,nsi->nk", self.N, dts) * self.free
         out += np.bincount(self.dofs.ravel(), weights=fu.ravel(), minlength=len(out))
 
-    def bubble_dofs(self, u_loc: np.ndarray, dt: np.ndarray) -> np.ndarray:
-        """The bubble dofs b (ne, 3m) recovered from the condensed solution."""
+    def bubble_dofs(self, u_loc: np.ndarray, dt: np.ndarray, load: BubbleLoad) -> np.ndarray:
+        """The bubble dofs b (ne, 3m) recovered from the condensed solution under ``load``."""
         dts = dt[np.maximum(self.face, 0)] * self.valid[:, :, None]
-        return self.cond.bubbles(u_loc[self.dofs], dts, self.fb)
+        return self.cond.bubbles(u_loc[self.dofs], dts, load.fb)
 
-    def cell_strain(self, u_loc: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    def cell_strain(self, u_loc: np.ndarray, dt: np.ndarray, load: BubbleLoad) -> np.ndarray:
         """The bubbles' strain averaged over each enriched cell (ne, 3, 3), recovered from the condensed solution
         (``bubble_dofs``): sym(sum_s b_s (x) int grad(phi_s) dV) / V. The stress is linear in it, so the cell
         mean of the stress of P1 plus bubbles is C:(eps(u) + this)."""
-        return mean_strain(self._grad, self._vol, self.lface, self.bubble_dofs(u_loc, dt))
+        return mean_strain(self._grad, self._vol, self.lface, self.bubble_dofs(u_loc, dt, load))
 
     # -- Jacobian ----------------------------------------------------------------------------------
     def jacobian_blocks(self, drdg: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:

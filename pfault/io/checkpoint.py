@@ -17,13 +17,12 @@ into one contiguous block per rank, through HDF5's MPI-IO driver (pfault.io.para
 array. Otherwise the arrays are gathered to rank 0, which writes them. The files are the same either way.
 A restart reads the attributes on rank 0 (the checks), then every rank reads the datasets.
 
-What a run carries from one step to the next (pfault.state.State: its own vectors, the fault interface's history
-and the flow model's): the solution u, the initial state u_ref, the initial stress sigma0, each fault face's
-initial traction ``t0``, its traction (a penalty face's shear depends on its history) and the pore pressure
-alpha p its contact law saw in the step (``pn``, which the next step's ``begin_step`` measures the faces' start
-state under), whether each face has slid, whether it has broken and when, and the flow model's head, time and
-records. The faces' stick/slip/open states are not state: the semismooth law reads them from u. The Jacobian and its
-factorisation are rebuilt at the first solve from the same values.
+What a run carries from one step to the next is its state (pfault.state.State): the solution u, the initial
+state u_ref, the state converged before u, the initial stress sigma0, the equations' terms' histories (a fault's:
+each face's initial traction, whether it has slid, whether it has broken and when) and the flow model's head, time
+and records. The faces' stick/slip/open states are not state: the semismooth law reads them from u; the faces'
+pore pressure is that of the checkpoint's time, set again on a restart. The Jacobian and its factorisation are
+rebuilt at the first solve from the same values.
 
 Contents (datasets; attributes on the root)
 - ``u/vertex`` (serial vertices x 6, or 3 per side where junctions give vertices more than 2), ``u/face``
@@ -33,13 +32,12 @@ Contents (datasets; attributes on the root)
 - ``u_previous/...``, attribute ``previous_time``: the state converged before u (a fault scene's predictor
   extrapolates from it), when there is one
 - ``sigma0`` (serial cells x 9, Pa): the geostatic initial stress, when there is one
-- ``faults/t0`` (serial fault faces x 3, Pa, local frame), ``faults/pn`` (serial fault faces, Pa),
-  ``faults/traction`` (serial fault faces x 3, Pa, local frame): the faces' total tractions at the step's time
-  (a penalty face's shear is the return map of its history, which its jump alone does not give); ``faults/slid``
-  (serial fault faces, 1 or 0): whether the face has slid (slipping or open at the end of a completed step, now or
+- ``faults/t0`` (serial fault faces x 3, Pa, local frame): each face's initial traction; ``faults/slid`` (serial
+  fault faces, 1 or 0): whether the face has slid (slipping or open at the end of a completed step, now or
   before), which decides whether its slip is reported; ``faults/broken`` (serial fault faces, 1 or 0) and
   ``faults/break_time`` (serial fault faces, s, NaN while intact): which faces of candidate surfaces have broken
-  and when (pfault.faults.breaking; every face of a pre-existing fault is broken, without a time)
+  and when (pfault.faults.breaking; every face of a pre-existing fault is broken, without a time): the fault
+  term's history (pfault.faults.term.FaultTerm.history_arrays)
 - ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
   ``flow_time``
 - ``steps``: the run's step records up to the checkpoint's step (JSON as bytes), those of summary.json: a run
@@ -47,10 +45,11 @@ Contents (datasets; attributes on the root)
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``
 
-Format 6. Format 5 (without ``faults/broken`` and ``faults/break_time``) is read with every face broken, without
-a time: the faults of the pfault that wrote it were all pre-existing. Format 4 (without ``faults/slid``) is read
-for a scene without faults and refused with faults; format 3 (without ``faults/traction`` and ``steps``), 2
-(multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and 1 are refused.
+Format 7. Format 6 also has ``faults/pn`` and ``faults/traction`` (the faces' pore pressure and tractions, which
+u and the loads of its time give): they are not read. Format 5 (without ``faults/broken`` and ``faults/break_time``)
+is read with every face broken, without a time: the faults of the pfault that wrote it were all pre-existing.
+Format 4 (without ``faults/slid``) is read for a scene without faults and refused with faults; format 3 (without
+``faults/traction`` and ``steps``), 2 (multipliers per serial cell: ``u/cell_ids``, ``u/cell``) and 1 are refused.
 """
 
 from __future__ import annotations
@@ -64,6 +63,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from ..errors import InputError, PfaultError, run_on_all, run_on_root
+from ..fields import LAGRANGE
 from ..mesh import distributed
 from . import parallel, run_options
 from .output import TMP_SUFFIX, open_h5
@@ -74,8 +74,8 @@ if TYPE_CHECKING:
     from ..model import Model
     from ..state import State
 
-FORMAT = 6                     # 5: no faults/broken; 4: no faults/slid; 3: no faults/traction; 2: multipliers
-                               # per serial cell
+FORMAT = 7                     # 6: faults/pn and faults/traction too; 5: no faults/broken; 4: no faults/slid;
+                               # 3: no faults/traction; 2: multipliers per serial cell
 NO_FAULT_SINCE = 4             # a checkpoint without faults reads the same since format 4
 FAULTS_SINCE = 5               # a checkpoint with faults is read since format 5
 NAME = "checkpoint.h5"
@@ -101,47 +101,36 @@ def local_state(model: Model, state: State, step: int, t: float, records: list[d
     the JSON are the same on every rank. Collective."""
     mesh, dofmap, eq = model.mesh, model.dofmap, model.equations
     vdofs = vertex_dofs(dofmap)
-    f = state.faults
-    flow = _flow(state)
+    source = model.source
     attrs = {"format": FORMAT, "step": int(step), "time_s": float(t), "scene": model.settings.scene,
              "ranks": mesh.dm.getComm().getSize(), "nodes": int(mesh.n_global_vertices),
-             "cells": int(mesh.n_global_cells), "fault_faces": int(len(model.fault_id)) if f is not None else 0,
+             "cells": int(mesh.n_global_cells), "fault_faces": int(model.faces.total),
              "dofs": int(state.u.getSize()), "fields": json.dumps(list(dofmap.fields)),
-             "geostatic": bool(model.settings.geostatic), "flow": flow is not None}
+             "geostatic": bool(model.settings.geostatic), "flow": bool(source.has_state)}
     data = {}
     vecs = [("u", state.u), ("u_ref", state.u_ref)]
     if state.previous is not None:
         vecs.append(("u_previous", state.previous[1]))
         attrs["previous_time"] = float(state.previous[0])
-    u_local = eq.local_array(state.u)
+    multipliers = LAGRANGE in dofmap.fields
     for name, vec in vecs:
-        local = u_local if vec is state.u else eq.local_array(vec)
+        local = eq.local_array(vec)
         data[f"{name}/vertex"] = (VERTEX, _take(local, vdofs))
-        if f is not None:
-            data[f"{name}/face"] = (FACE, _take(local, f.faces.lm_dofs))
+        if multipliers:
+            data[f"{name}/face"] = (FACE, _take(local, model.faces.lm_dofs))
     if state.sigma0 is not None:
         data["sigma0"] = (CELL, np.asarray(state.sigma0, dtype=float).reshape(-1, 9))
-    if f is not None:
-        data["faults/t0"] = (FACE, np.asarray(f.t0, dtype=float))
-        data["faults/pn"] = (FACE, np.asarray(f.pn, dtype=float))
-        data["faults/traction"] = (FACE, np.asarray(f.tractions(u_local), dtype=float))
-        data["faults/slid"] = (FACE, state.fault_slid.astype(float))
-        data["faults/broken"] = (FACE, state.fault_broken.astype(float))
-        data["faults/break_time"] = (FACE, np.asarray(state.fault_break_time, dtype=float))
+    for term, history in zip(eq.terms, state.histories):
+        for key, values in term.history_arrays(history).items():
+            data[f"{term.name}/{key}"] = (term.rows, values)
     # datasets, not attributes: a long run's records outgrow HDF5's 64 KiB attribute limit
     texts = {"steps": json.dumps(records).encode()}
-    if flow is not None:
-        head, flow_time, history = flow.checkpoint()
+    if source.has_state:
+        head, flow_time, history = source.checkpoint()
         data["flow/head"] = (VERTEX, np.asarray(head, dtype=float))
         texts["flow/history"] = json.dumps(history).encode()
         attrs["flow_time"] = float(flow_time)
     return data, attrs, texts
-
-
-def _flow(state):
-    """The state's flow model (a source with a state of its own), or None."""
-    source = state.source
-    return source if source is not None and source.has_state else None
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -152,18 +141,18 @@ class Writer:
     docstring) or gathered to rank 0. ``faces``: the serial ids of the fault faces this rank owns (None without
     faults). Every method is collective."""
 
-    def __init__(self, comm: Any, mesh: LocalMesh, faces: np.ndarray | None = None, n_faces: int = 0,
+    def __init__(self, comm: Any, mesh: LocalMesh, faces: np.ndarray, n_faces: int = 0,
                  parallel_io: bool = False) -> None:
         self.mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
         self.mesh, self.parallel = mesh, bool(parallel_io)
-        self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
+        self.faces = np.asarray(faces, dtype=np.int64)
         self.n_faces = int(n_faces)
         if not self.parallel:
             return
         own = np.flatnonzero(mesh.vert_owned)
         self.rows = {VERTEX: parallel.Rows(mesh.vert_serial[own], mesh.n_global_vertices, own),
                      CELL: parallel.Rows(mesh.cell_serial, mesh.n_global_cells)}
-        if self.faces is not None:
+        if self.n_faces:
             self.rows[FACE] = parallel.Rows(self.faces, self.n_faces)
         self.blocks = parallel.blocks(self.mpi, NAME, self.rows)
 
@@ -306,9 +295,9 @@ def check(attrs: dict[str, Any], run_dir: str, model: Model, state: State) -> No
     run_options.check_options(run_dir, dict(PETSc.Options().getAll()), float(attrs["time_s"]),
                               s.water_density, s.gravity)
     mine = {"nodes": int(model.mesh.n_global_vertices), "cells": int(model.mesh.n_global_cells),
-            "fault_faces": int(len(model.fault_id)) if model.faults is not None else 0,
+            "fault_faces": int(model.faces.total),
             "dofs": int(state.u.getSize()), "geostatic": bool(s.geostatic),
-            "flow": _flow(state) is not None}
+            "flow": bool(model.source.has_state)}
     for key, value in mine.items():
         theirs = attrs.get(key)
         if (bool(theirs) if isinstance(value, bool) else theirs) != value:
@@ -318,19 +307,18 @@ def check(attrs: dict[str, Any], run_dir: str, model: Model, state: State) -> No
 
 def restore(ckpt: dict[str, np.ndarray], attrs: dict[str, Any], model: Model, state: State) -> None:
     """Put the checkpoint's state ({dataset path: serial array}, ``attrs``) into ``state``; every rank holds
-    them. The time loop then goes on as after the checkpoint's step: its next step's ``begin_step`` measures the
-    faces' start from the restored u under the restored pore pressure."""
+    them. The terms' histories start from the restored u under the loads of the checkpoint's time, as the time
+    loop's next step would after the checkpoint's step."""
     mesh, dofmap, eq = model.mesh, model.dofmap, model.equations
-    f = state.faults
     vdofs = vertex_dofs(dofmap)
+    lm = model.faces.lm_dofs
 
     def vec(name, out):
         local = np.zeros(dofmap.n_local)
         v = ckpt[f"{name}/vertex"][mesh.vert_serial]
         local[vdofs[vdofs >= 0]] = v[vdofs >= 0]
-        if f is not None:
-            lm = f.faces.lm_dofs
-            local[lm[lm >= 0]] = ckpt[f"{name}/face"][f.faces.face][lm >= 0]
+        if f"{name}/face" in ckpt:
+            local[lm[lm >= 0]] = ckpt[f"{name}/face"][model.faces.face][lm >= 0]
         eq.to_global(local, PETSc.InsertMode.INSERT_VALUES, out=out)
 
     vec("u", state.u)
@@ -343,21 +331,19 @@ def restore(ckpt: dict[str, np.ndarray], attrs: dict[str, Any], model: Model, st
         prev.destroy()
     if "sigma0" in ckpt:
         state.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
-    flow = _flow(state)
-    if flow is not None:
-        flow.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
-                     json.loads(bytes(ckpt["flow/history"]).decode()))
-    if f is not None:
-        f.t0 = ckpt["faults/t0"][f.faces.face].copy()
-        eq.loads.set(state.time)        # the face bubbles' loads of the checkpoint's time: the faces' start reads them
-        f.set_pore_pressure(ckpt["faults/pn"][f.faces.face])
-        # the broken faces before the start: an intact face's start state is stuck
-        if "faults/broken" in ckpt:
-            state.set_broken(ckpt["faults/broken"][f.faces.face] > 0.5, ckpt["faults/break_time"][f.faces.face])
-        else:               # format 5: every fault pre-existing
-            state.set_broken(np.ones(f.faces.nf, dtype=bool), np.full(f.faces.nf, np.nan))
-        f.start_from(eq.local_array(state.u), ckpt["faults/traction"][f.faces.face])
-        state.fault_slid = ckpt["faults/slid"][f.faces.face] > 0.5
+    if model.source.has_state:
+        model.source.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
+                             json.loads(bytes(ckpt["flow/history"]).decode()))
+    eq.loads.set(state.time)        # the terms' loads of the checkpoint's time: their start reads them
+    x_loc = eq.local_array(state.u)
+    rows = {FACE: model.faces.face, CELL: mesh.cell_serial}
+    histories = []
+    for term, load in zip(eq.terms, eq.loads.term_loads):
+        prefix = term.name + "/"
+        arrays = {key[len(prefix):]: values[rows[term.rows]] for key, values in ckpt.items()
+                  if key.startswith(prefix)}
+        histories.append(term.restored(arrays, x_loc, load))
+    state.histories = tuple(histories)
 
 
 def load(comm: Any, run_dir: str, model: Model, state: State) -> tuple[dict[str, Any], list[dict[str, Any]]]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import errno
 import shutil
-from contextlib import nullcontext
+import time
 from typing import Any
 
 import numpy as np
@@ -14,7 +14,12 @@ from petsc4py import PETSc
 
 from ..effects import logged
 from ..errors import EXIT_NOT_CONVERGED, InputError, OutputError, run_on_root
-from ..mesh.fault import copy_index
+from ..mesh.fault import output_mesh
+from ..run import per_side
+from . import checkpoint, parallel
+from .figures import write_run_figures
+from .output import RunWriter, record_failure
+from .steps import LocalStep, StepOutput
 from .summary import RunSummary
 
 
@@ -77,88 +82,70 @@ class ProgressLine(Observer):
         self.candidates = tuple(candidates)
 
     def step_done(self, result: Any) -> None:
-        PETSc.Sys.Print(progress_line(result.step, result.record, self.candidates))
+        PETSc.Sys.Print(progress_line(result.step, result.record.as_json(), self.candidates))
 
 
 class RunOutput:
     """The run's output directory and its writers (pfault.io.output.RunWriter on rank 0, pfault.io.steps.StepOutput
-    and pfault.io.checkpoint.Writer on every rank). Opened after the first solve (``open``); every method is
-    collective unless it says otherwise."""
+    and pfault.io.checkpoint.Writer on every rank). ``surface``: the land surface (pfault.surface.LandSurface).
+    Opened after the first solve (``open``); every method is collective unless it says otherwise."""
 
-    def __init__(self, model: Any, state: Any, argv: list, restart_dir: str | None = None,
+    def __init__(self, model: Any, state: Any, argv: list, surface: Any, restart_dir: str | None = None,
                  restart_step: int | None = None) -> None:
-        self.model, self.state, self.argv = model, state, list(argv)
+        self.model, self.state, self.argv, self.surface = model, state, list(argv), surface
         self.comm = model.comm
         self.restart_dir, self.restart_step = restart_dir, restart_step
         self.writer: Any = None             # rank 0, once open (a RunWriter)
         self.staging: str | None = None     # where the output goes (every rank, once it is opened)
         self.run_path: str | None = None
-        self.committed = False              # the run's directory is in place
+        self.committed = False              # the run's directory is in place (RunWriter.commit)
         self.fields: Any = None             # StepOutput, once open
         self.checkpoint: Any = None         # checkpoint.Writer, once open
-        self.surface: Any = None            # the land surface (rank 0), once the writer is made
+        self.initial: tuple | None = None   # the initial state's output step (values, land surface's step)
 
     @property
     def is_open(self) -> bool:
         return self.fields is not None
 
+    def capture_initial(self) -> None:
+        """The output step of the initial state, taken before the first step is solved (its loads, the faces'
+        pore pressure at time 0) and written when the output opens."""
+        m, state = self.model, self.state
+        zeros = np.zeros(m.dofmap.n_local)
+        eq = m.equations
+        rest = tuple(term.at_rest(load) for term, load in zip(eq.terms, eq.loads.term_loads))
+        values = self.step_values(zeros, eq.local_array(state.u_ref), np.zeros(len(m.mesh.cells)), rest)
+        self.initial = (values, self.surface.measure(per_side(m, zeros))[1])
+
     def open(self) -> None:
         """Stage the output directory and write the initial state, or on a restart the output steps of the run
         it continues. Nothing is written before this, and the output directory is replaced only after the first
         completed step (RunWriter.commit)."""
-        from . import checkpoint, parallel as par
         self.writer = run_on_root(self.comm, self._create_writer)
         # where the run writes, known to every rank: one that fails alone says there how the run ended
         w = self.writer
         self.staging, self.run_path = self.comm.tompi4py().bcast((w.dir, w.path) if self.comm.rank == 0 else None)
         m = self.model
-        parallel = par.available(self.comm)
-        self.fields = self.step_output(self.writer, parallel)
-        faces = None if m.faults is None else m.faults.faces.face
-        self.checkpoint = checkpoint.Writer(self.comm, m.mesh, faces=faces,
-                                            n_faces=0 if m.faults is None else len(m.fault_id),
-                                            parallel_io=parallel)
-        if not self.restart_dir:
-            self.write_fields(0, 0.0, np.zeros(m.dofmap.n_local), initial=True)
-
-    def step_output(self, writer: Any, parallel: bool) -> Any:
-        """A StepOutput writing through ``writer`` (rank 0); ``parallel``: the volume and fault fields written
-        by every rank."""
-        from .steps import StepOutput
-        m = self.model
-        mpi = self.comm.tompi4py()
-        sides = mpi.bcast(m.split.vert_sides if self.comm.rank == 0 and m.split is not None else None)
-        return StepOutput(self.comm, m.mesh, writer, sides, m.dofmap.max_sides,
-                          faces=None if m.faults is None else m.faults.faces.face,
-                          fault_id=None if m.faults is None else m.fault_id,
-                          surface=self.surface if self.comm.rank == 0 else None, parallel=parallel)
-
-    def output_mesh(self) -> tuple[np.ndarray, np.ndarray]:
-        """Output mesh on rank 0: a split fault vertex appears once per piece of its star (the copies after the
-        serial vertices, pfault.mesh.fault.vertex_copies); each cell uses the copies of its pieces."""
-        serial, split = self.model.serial, self.model.split
-        pts, tets = serial.points, serial.tets
-        if split is None:
-            return pts, tets
-        vertex, _ = split.copies
-        piece = split.cell_side
-        copy = len(pts) + copy_index(split.vert_sides, tets, np.maximum(piece, 1))
-        return np.concatenate([pts, pts[vertex]]), np.where(piece > 0, copy, tets)
+        use_parallel = parallel.available(self.comm)
+        sides = self.comm.tompi4py().bcast(m.split.vert_sides if self.comm.rank == 0 and m.split is not None
+                                           else None)
+        self.fields = StepOutput(self.comm, m.mesh, self.writer, sides, m.dofmap.max_sides, faces=m.faces.face,
+                                 fault_id=m.fault_id, parallel=use_parallel)
+        self.checkpoint = checkpoint.Writer(self.comm, m.mesh, faces=m.faces.face, n_faces=len(m.fault_id),
+                                            parallel_io=use_parallel)
+        if not self.restart_dir and self.initial is not None:
+            self.fields.write(0, 0.0, *self.initial)
 
     def create_writer(self, output_dir: str) -> Any:
         """A RunWriter into ``output_dir`` (rank 0)."""
-        from . import hazard
-        from .output import RunWriter
         m = self.model
-        points, tets = self.output_mesh()
-        self.surface = hazard.land_surface(points, tets, m.serial, m.split, m.settings.ground_surface,
-                                           m.settings.hazard_strain_threshold)
+        points, tets = output_mesh(m.serial.points, m.serial.tets, m.split)
+        surface = self.surface.surface
         try:
             writer = RunWriter(output_dir, points, tets, m.serial.cell_material, m.scene.material_names,
                                fault_mesh=None if m.split is None else (m.serial.points, m.split.faces,
                                                                         m.split.fault_id),
-                               surface_mesh=None if self.surface is None else (self.surface.points,
-                                                                               self.surface.triangles))
+                               surface_mesh=None if surface is None else (surface.points, surface.triangles))
             writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
             if self.restart_dir:
                 writer.continue_from(self.restart_dir, int(self.restart_step or 0))
@@ -173,31 +160,27 @@ class RunOutput:
     def _create_writer(self) -> Any:
         return self.create_writer(self.model.settings.output_dir)
 
-    def step_values(self, t: float, u_rel: np.ndarray, initial: bool = False) -> Any:
-        """This rank's values of one output step (pfault.io.steps.LocalStep)."""
-        from .steps import LocalStep
+    def step_values(self, u_rel: np.ndarray, u_total: np.ndarray, dp: np.ndarray, loads: tuple) -> LocalStep:
+        """This rank's values of one output step (pfault.io.steps.LocalStep): displacements relative to the initial
+        state ``u_rel``, the total state ``u_total``, the pore-pressure change per cell ``dp`` and the terms'
+        loads ``loads`` (one per term)."""
         m, state = self.model, self.state
-        eq, dofmap = m.equations, m.dofmap
-        both = np.concatenate([u_rel[dofmap.vertex_dofs(side)] for side in range(dofmap.max_sides)], axis=1)
-        u_total = eq.local_array(state.u_ref if initial else state.u)
-        dp = eq.loads.cell_dp(t) if not initial else np.zeros(len(m.mesh.cells))
-        faults = None
-        # the initial state is written after the first step is solved: its face bubbles (in the stress of the cells
-        # beside a fault and in the faces' jumps) without that step's loads; no face has slid yet
-        with m.faults.bubbles.unloaded() if initial and m.faults is not None else nullcontext():
-            sig = eq.cell_total_stress(u_total, dp, state.sigma0).reshape(-1, 9)
-            if m.faults is not None:
-                slid = np.zeros_like(state.fault_slid) if initial else state.fault_slid
-                broken = (m.faults.strength.initially_broken(), np.full(len(slid), np.nan)) if initial else \
-                    (state.fault_broken, state.fault_break_time)
-                faults = _fault_fields(m.faults, u_total, u_rel, slid, broken)
-        head = m.source.vertex_head()
-        return LocalStep(both, head, {"pore_pressure_change": dp, "stress": sig}, faults)
+        eq = m.equations
+        sig = eq.cell_total_stress(u_total, dp, state.sigma0, state.histories, loads).reshape(-1, 9)
+        cells: dict = {"pore_pressure_change": dp, "stress": sig}
+        faces: dict = {}
+        for term, load, h in zip(eq.terms, loads, state.histories):
+            for series, values in term.fields(u_total, u_rel, load, h).items():
+                (faces if series == "fault" else cells).update(values)
+        return LocalStep(per_side(m, u_rel), m.source.vertex_head(), cells, faces or None)
 
-    def write_fields(self, step: int, t: float, u_rel: np.ndarray, initial: bool = False) -> dict | None:
-        """Write one output step (fields, fault, land surface); returns the land surface's hazard maxima (every
-        rank), None without a land surface."""
-        return self.fields.write(step, t, self.step_values(t, u_rel, initial))
+    def write_step(self, result: Any, fields: Any = None) -> None:
+        """Write the output step of a step's result (fields, faults, land surface) with the run's StepOutput, or
+        with ``fields``."""
+        eq = self.model.equations
+        values = self.step_values(result.u_rel, eq.local_array(self.state.u), eq.loads.cell_dp(result.t),
+                                  eq.loads.term_loads)
+        (fields or self.fields).write(result.step, result.t, values, result.surface)
 
     def write_summary(self, summary: dict) -> None:
         """The summary so far, and the first time the run's directory put in place (every rank)."""
@@ -213,14 +196,12 @@ class RunOutput:
 
     def finish(self, summary: dict, figures: bool) -> None:
         """Rank 0: the final summary.json, then the figures."""
-        import time
         if self.writer is None:
             return
         self.writer.write_summary(summary)
         self.writer.commit()
         self.writer.close()
         if figures and not summary["interrupted"]:
-            from .figures import write_run_figures
             t0 = time.perf_counter()
             paths = write_run_figures(self.writer.dir)
             PETSc.Sys.Print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
@@ -241,7 +222,6 @@ class RunOutput:
         says how the run ended in the summary.json of a run directory in place (that of the last completed
         step: every rank knows it is in place once that step is done), or removes the staging directory of a
         run that has not completed a step. Best effort: the failure may be the full disk itself."""
-        from .output import record_failure
         writer = self.writer
         if self.run_path is None:
             return                                  # nothing written yet
@@ -266,34 +246,15 @@ class RunOutput:
             self.writer.abandon()         # nothing happens to a run directory already in place
 
 
-def _fault_fields(fs: Any, u_total: np.ndarray, u_rel: np.ndarray, slid: np.ndarray,
-                  broken: tuple[np.ndarray, np.ndarray]) -> dict:
-    """Per fault face this rank owns: tractions from the total state, jumps relative to the initial state (every
-    face's, as computed), its state (stick 0, slip 1, open 2) and whether it has slid (slipping or open at the
-    end of a completed step, now or before: its slip is in the reported maxima), whether it is broken and when it
-    broke (``broken``: flags and times, s, NaN while intact and on a pre-existing fault)."""
-    t_loc, _, t_glob, _, state = fs.face_fields(u_total)
-    g, gl = fs.relative_jumps(u_rel)
-    return {"traction_normal": t_loc[:, 0], "traction_shear": t_glob - t_loc[:, :1] * fs.faces.normal,
-            "opening": gl[:, 0], "slip": g - gl[:, :1] * fs.faces.normal,
-            "slip_magnitude": np.linalg.norm(gl[:, 1:], axis=1), "state": np.asarray(state, dtype=np.int64),
-            "slid": np.asarray(slid, dtype=np.int64), "broken": np.asarray(broken[0], dtype=np.int64),
-            "break_time": np.asarray(broken[1], dtype=float),
-            "traction_normal_effective": fs.effective(t_loc)[:, 0]}
-
-
 class FieldOutput(Observer):
-    """The fields of every output step (volume, faults, land surface); the land surface's hazard maxima go to
-    the step's derived figures."""
+    """The fields of every output step (volume, faults, land surface)."""
 
     def __init__(self, output: RunOutput) -> None:
         self.output = output
 
     def step_done(self, result: Any) -> None:
         if result.output:
-            hz = self.output.write_fields(result.step, result.t, result.u_rel)
-            if hz is not None:
-                result.derived.update(hz)
+            self.output.write_step(result)
 
 
 class CheckpointObserver(Observer):
@@ -303,7 +264,7 @@ class CheckpointObserver(Observer):
         self.output, self.state, self.records = output, state, records
 
     def step_done(self, result: Any) -> None:
-        if result.record["converged"]:
+        if result.record.converged:
             out = self.output
             with logged("pfaultCheckpoint"):
                 out.checkpoint.write(out.run_path if out.committed else out.staging, out.model, self.state,
@@ -318,5 +279,5 @@ class SummaryObserver(Observer):
         self.output, self.summary, self.records = output, summary, records
 
     def step_done(self, result: Any) -> None:
-        self.output.write_summary(self.summary.compose(self.records, result.record["converged"], None,
+        self.output.write_summary(self.summary.compose(self.records, result.record.converged, None,
                                                        running=True))

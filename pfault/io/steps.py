@@ -18,7 +18,6 @@ import numpy as np
 from ..errors import run_on_root
 from ..mesh import distributed
 from ..mesh.fault import copy_index, vertex_copies
-from . import hazard
 from .parallel import ParallelSeries, Rows
 
 if TYPE_CHECKING:
@@ -40,19 +39,17 @@ class StepOutput:
     (pieces) of every serial vertex, None without faults (the output mesh has a copy of each piece but the first
     after the serial vertices, pfault.mesh.fault.vertex_copies); ``max_sides`` the columns of a LocalStep's
     displacement over 3; ``faces``: the serial ids of the fault faces this rank owns and ``fault_id`` the fault of every
-    face (None without faults); ``surface``: the land surface (pfault.io.hazard.Surface, rank 0; None
-    elsewhere or when there is none). Every method is collective."""
+    face (empty without faults: no fault series). Every method is collective."""
 
     def __init__(self, comm: Any, mesh: LocalMesh, writer: Any, vert_sides: np.ndarray | None, max_sides: int,
-                 faces: np.ndarray | None = None, fault_id: np.ndarray | None = None,
-                 surface: hazard.Surface | None = None, parallel: bool = False) -> None:
+                 faces: np.ndarray, fault_id: np.ndarray, parallel: bool = False) -> None:
         self.comm, self.mpi = comm, comm.tompi4py()
-        self.mesh, self.writer, self.surface = mesh, writer, surface
+        self.mesh, self.writer = mesh, writer
         n = mesh.n_global_vertices
         self.vert_sides = np.ones(n, np.int64) if vert_sides is None else np.asarray(vert_sides, dtype=np.int64)
         self.copies, self.faces = vertex_copies(self.vert_sides), faces
         self.parallel = bool(parallel)
-        self.n_faces = 0 if fault_id is None else len(fault_id)
+        self.n_faces = len(fault_id)
         self.series = {}
         if not parallel:
             return
@@ -66,25 +63,22 @@ class StepOutput:
         self.vertices = Rows(np.concatenate(rows), n + len(self.copies[0]), np.concatenate(take))
         self.cells = Rows(mesh.cell_serial, mesh.n_global_cells)
         rows = {"fields": {"Node": self.vertices, "Cell": self.cells}}
-        if faces is not None:
+        if self.n_faces:
             self.face_rows = Rows(faces, self.n_faces)
             rows["fault"] = {"Cell": self.face_rows}
             self.fault_id = np.asarray(fault_id, dtype=np.int64)[faces]
-        self.surface_vertices = self.mpi.bcast(None if surface is None else surface.vertices, root=0)
-        if self.surface_vertices is not None:
-            on = np.isin(self.vertices.rows, self.surface_vertices)
-            self.surface_rows, self.surface_take = self.vertices.rows[on], self.vertices.take[on]
         run_on_root(comm, lambda: writer.release(list(rows)))      # writer: rank 0 only
         directory = self.mpi.bcast(writer.dir if self.mpi.rank == 0 else None, root=0)
         for name, by_center in rows.items():
             self.series[name] = ParallelSeries(comm, directory, name, by_center)
 
-    def write(self, step: int, t: float, values: LocalStep) -> dict[str, float | list[float] | None] | None:
-        """Write one step (LocalStep ``values``); returns the land surface's hazard maxima (every rank)."""
+    def write(self, step: int, t: float, values: LocalStep, surface: Any = None) -> None:
+        """Write one step (LocalStep ``values``, and the land surface's step ``surface``, pfault.surface.SurfaceStep,
+        on rank 0: None elsewhere or without a land surface)."""
         write = self._write_parallel if self.parallel else self._write_gathered
-        return self.mpi.bcast(write(step, t, values), root=0)
+        write(step, t, values, surface)
 
-    def _write_parallel(self, step, t, values):
+    def _write_parallel(self, step, t, values, surface):
         disp = values.displacement.reshape(len(values.displacement), -1, 3).transpose(1, 0, 2).reshape(-1, 3)
         point = {"displacement": disp}
         if values.head is not None:
@@ -96,20 +90,13 @@ class StepOutput:
             faults = {"fault": self.fault_id}
             faults.update(values.faults)
             entries["fault"] = self.series["fault"].write_step(step, t, None, faults)
-        u_surface = None
-        if self.surface_vertices is not None:
-            parts = self.mpi.gather((self.surface_rows, disp[self.surface_take]), root=0)
-            if self.mpi.rank == 0:
-                u_surface = np.zeros((len(self.surface_vertices), 3))
-                for rows, u in parts:
-                    u_surface[np.searchsorted(self.surface_vertices, rows)] = u
 
         def write():
             self.writer.add_steps(entries)
-            return self._surface_step(step, t, u_surface)
-        return run_on_root(self.comm, write)        # a failure to write ends every rank
+            self._surface_step(step, t, surface)
+        run_on_root(self.comm, write)        # a failure to write ends every rank
 
-    def _write_gathered(self, step, t, values):
+    def _write_gathered(self, step, t, values, surface):
         mesh = self.mesh
         both = distributed.gather_vertex_values(mesh, values.displacement)
         head = None if values.head is None else distributed.gather_vertex_values(mesh, values.head.reshape(-1, 1))
@@ -132,20 +119,13 @@ class StepOutput:
             self.writer.write_step(step, t, point_data, cell_data)
             if faults is not None:
                 self.writer.write_fault_step(step, t, _by_face(faults, self.n_faces))
-            return self._surface_step(step, t, None if self.surface is None else u[self.surface.vertices])
-        return run_on_root(self.comm, write)        # a failure to write ends every rank
+            self._surface_step(step, t, surface)
+        run_on_root(self.comm, write)        # a failure to write ends every rank
 
-    def _surface_step(self, step, t, u):
-        """Land-surface fields of one output step (rank 0): displacement and the earth-fissure hazard fields;
-        returns their maxima and where they are."""
-        surf = self.surface
-        if surf is None:
-            return None
-        fields = hazard.surface_fields(surf.points, surf.triangles, u)
-        self.writer.write_surface_step(step, t, {"displacement": u}, fields)
-        out = hazard.maxima(surf.points, surf.triangles, fields)
-        out.update(hazard.fissure_prone(surf.points, surf.triangles, u, surf.strain_threshold))
-        return out
+    def _surface_step(self, step, t, surface):
+        """Land-surface fields of one output step (rank 0): displacement and the earth-fissure hazard fields."""
+        if surface is not None:
+            self.writer.write_surface_step(step, t, {"displacement": surface.displacement}, surface.fields)
 
     def close(self) -> None:
         for series in self.series.values():

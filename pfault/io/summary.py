@@ -11,8 +11,6 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-import numpy as np
-
 from .hazard import summary_maxima
 
 
@@ -34,7 +32,7 @@ class RunSummary:
             "scene": m.settings.scene,
             "ranks": m.comm.size,
             "mesh": {"nodes": int(m.mesh.n_global_vertices), "cells": int(m.mesh.n_global_cells),
-                     "fault_faces": int(len(m.fault_id)) if m.faults is not None else 0},
+                     "fault_faces": int(m.faces.total)},
             "fields": list(m.dofmap.fields),
             "dofs": int(self.state.u.getSize()),
             "solver": self.solver_record(steps),
@@ -52,8 +50,8 @@ class RunSummary:
             "interrupted": stop is not None,
             "completed_steps": [r["step"] for r in last if r["converged"]],
         }
-        if m.faults is not None:
-            summary["faults"] = fault_summary(m, last)
+        for term in m.equations.terms:
+            summary.update(term.summary(last, m.mesh))
         summary.update(summary_maxima(last, m.settings.hazard_strain_threshold))
         if stop is not None:
             summary["stop_signal"] = stop
@@ -71,43 +69,6 @@ class RunSummary:
                 "newton_its": int(newton), "ksp_its": int(krylov),
                 "ksp_per_newton": krylov / newton if newton else 0.0,
                 "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
-
-
-def fault_summary(model: Any, steps: list) -> dict:
-    """Per fault (by name): its faces, the mean height of the cells beside it, the largest opening of an open
-    face and slip of a face that has slid over the steps ``steps`` (0 where none did), and at the last of them
-    its faces stuck, slipping, open and broken, its integrals (slip potency, open volume, slipping and open areas:
-    pfault.run.fault_figures) and its broken part's area, depth, trace length and first break time
-    (pfault.run.broken_figures). Collective."""
-    names = [f.name for f in model.scene.fault_settings]
-    faces = np.bincount(model.fault_id, minlength=len(names))
-    height = beside_height(model, len(names))
-    out = {}
-    for k, name in enumerate(names):
-        per = [r["faults"][name] for r in steps if "faults" in r]
-        last = per[-1] if per else {}
-        out[name] = {"faces": int(faces[k]), "beside_cell_height_m": height[k],
-                     "max_opening_m": max([p["max_opening_m"] for p in per], default=0.0),
-                     "max_slip_m": max([p["max_slip_m"] for p in per], default=0.0),
-                     **dict.fromkeys(("faces_stuck", "faces_slipping", "faces_open", "faces_broken", "broken_area_m2",
-                                      "broken_depth_m", "broken_length_m"), 0),
-                     "first_break_time_s": None,
-                     **{key: v for key, v in last.items() if key not in ("max_opening_m", "max_slip_m")}}
-    return out
-
-
-def beside_height(model: Any, n_faults: int) -> list:
-    """Per fault, the mean height of the cells on both sides of its faces over them (3 x volume / face area,
-    weighted by the face's area: the distance the P1 displacement spreads a jump over, the resolution of the
-    fault's answer; m). Collective."""
-    faces = model.faults.faces
-    x = model.mesh.coords[model.mesh.cells[faces.sides.cell]]          # (nf, 2, 4, 3)
-    e = x[:, :, 1:] - x[:, :, :1]
-    volume = np.abs(np.einsum("nsi,nsi->ns", e[:, :, 0], np.cross(e[:, :, 1], e[:, :, 2]))) / 6.0
-    sums = np.zeros((n_faults, 2))
-    np.add.at(sums, faces.fault, np.column_stack([1.5 * volume.sum(axis=1), faces.area]))
-    sums = model.comm.tompi4py().allreduce(sums)
-    return [float(h / a) if a > 0 else 0.0 for h, a in sums]
 
 
 def memory_peak_mib(comm: Any) -> list:

@@ -69,6 +69,18 @@ def copy_index(vert_sides: np.ndarray, vertex: np.ndarray, piece: np.ndarray) ->
     return (np.cumsum(extra) - extra)[vertex] + piece - 1
 
 
+def output_mesh(points: np.ndarray, tets: np.ndarray, split: FaultSplit | None) -> tuple[np.ndarray, np.ndarray]:
+    """The output mesh of a serial mesh (points, tets) and its fault split (None: none): a split fault vertex
+    appears once per piece of its star (the copies after the serial vertices, ``vertex_copies``); each cell uses
+    the copies of its pieces."""
+    if split is None:
+        return points, tets
+    vertex, _ = split.copies
+    piece = split.cell_side
+    copy = len(points) + copy_index(split.vert_sides, tets, np.maximum(piece, 1))
+    return np.concatenate([points, points[vertex]]), np.where(piece > 0, copy, tets)
+
+
 def _components(n, a, b, rel=None):
     """Connected components of an undirected graph on n nodes by min-label propagation with pointer jumping.
 

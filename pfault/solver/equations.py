@@ -1,22 +1,20 @@
-"""The equations: F(x) = K u - f(t) + fault terms with Dirichlet rows, and their Jacobian.
+"""The equations: F(x) = K u - f(t) + the terms' residuals, with Dirichlet rows, and their Jacobian.
 
-The elastic skeleton is given a ``pfault.faults.interface.FaultInterface`` when the scene has faults (``faults``
-None otherwise). Without faults F is linear and K its Jacobian; with faults the interface adds the faces'
-residual rows and Jacobian blocks, the faces' stick/slip/open states read from each iterate. How the equations
-are solved (SNES and KSP set-up, predictor, factor reuse, step cutting) is ``pfault.solver.policy``'s.
+The elastic skeleton is given a list of terms (pfault.solver.terms: a fault interface, pfault.faults.term); with
+none F is linear and K its Jacobian; the terms add their residual rows and Jacobian blocks, reading their state
+(a fault face's stick/slip/open) from each iterate, given their histories. How the equations are solved (SNES
+and KSP set-up, predictor, factor reuse, step cutting) is ``pfault.solver.policy``'s.
 """
 
 from __future__ import annotations
 
 import time
-from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ..faults import contact as ct
 from ..physics import elasticity as el
 from .loads import Loads
 from .setup import rigid_body_modes
@@ -36,15 +34,15 @@ def constrained_local(mesh: Any, dofmap: Any) -> np.ndarray:
 
 class Equations:
     """Linear elastic skeleton loaded by the pore-pressure change of ``source``, gravity/prestress and
-    tractions (``loads``, a pfault.solver.loads.Loads), with the interface terms of ``faults`` (or None). ``J``
-    holds the Jacobian last assembled."""
+    tractions (``loads``, a pfault.solver.loads.Loads), with the ``terms`` (pfault.solver.terms). ``J`` holds
+    the Jacobian last assembled. The terms' histories are arguments (``histories``: one per term, in order)."""
 
     def __init__(self, mesh: Any, dofmap: Any, assembler: Any, boundaries: list, source: Any, settings: Any,
-                 faults: Any = None, contact: Any = None) -> None:
+                 terms: tuple = ()) -> None:
         self.mesh, self.dofmap, self.asm = mesh, dofmap, assembler
         self.dm = mesh.dm
         self.comm = self.dm.getComm()
-        self.settings, self.faults = settings, faults
+        self.settings, self.terms = settings, tuple(terms)
         self._log_residual = PETSc.Log.Event("pfaultResidual")
         self._log_jacobian = PETSc.Log.Event("pfaultJacobian")
         log_assembly = PETSc.Log.Event("pfaultAssembleK")
@@ -54,20 +52,24 @@ class Equations:
         self.K = self._build_operator()
         self.bc_rows = self._constrained_rows()
         # the lifts of prescribed displacements take K before its constrained rows and columns are zeroed
-        self.loads = Loads(self, boundaries, source, settings, contact)
+        self.loads = Loads(self, boundaries, source, settings)
         self.K.zeroRowsColumns(self.bc_rows, diag=1.0)
         self.assembly_wall = time.perf_counter() - t0
         log_assembly.end()
         self.nullspace = rigid_body_modes(mesh, dofmap, self.dm)
         self.K.setNearNullSpace(self.nullspace)
         self.J = self.K
-        if faults is not None:
+        if not self.linear:
             self.J = self.K.duplicate(copy=True)
             self.J.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
             self.J.setNearNullSpace(self.nullspace)
-        self.n_jacobians = 0            # interface Jacobians assembled (a configuration seen before is kept)
-        self._jacobian_key: np.ndarray | None = None    # faces' states of J while it depends on nothing else
-        self._states: np.ndarray | None = None  # faces' states imposed on residual and Jacobian (fixed_states)
+        self.n_jacobians = 0            # Jacobians of the terms assembled (a configuration seen before is kept)
+        self._jacobian_key: np.ndarray | None = None    # the terms' configuration of J while it depends on nothing else
+
+    @property
+    def linear(self) -> bool:
+        """No term: F is K u - f, and K its Jacobian."""
+        return not self.terms
 
     def _build_operator(self) -> Any:
         # Filled as BAIJ (every point carries 3k dofs, so the DM's local-to-global map has block size 3): a cell
@@ -82,21 +84,21 @@ class Equations:
         Kb.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         blocked = Kb.getLGMap()[0].getBlockSize() == 3
         self.asm.add_stiffness(Kb, blocked=blocked)
-        if self.faults is not None:
-            self.faults.add_stiffness(Kb, blocked)      # the condensed face bubbles
-            self.faults.faces.insert_pattern(Kb)
+        for term in self.terms:
+            term.add_operator(Kb, blocked)      # a fault's condensed face bubbles, its faces' pattern
         Kb.assemble()
         lgmap = Kb.getLGMap()
         K = Kb.convert(PETSc.Mat.Type.AIJ)      # in place; the conversion drops the local-to-global map
         K.setLGMap(*lgmap)
         K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        if self.faults is None:
+        if self.linear:
             return K
-        # rebuilt with the pattern of the bubbles' blocks (beyond the cells' closures: a face's row reaches the
-        # plus cell's fourth vertex, a cell's rows the multipliers of its faces, a face's row those of the faces
-        # sharing a cell) and block size 3 (every point carries 3, 6 or 3k dofs: AMG reads the block size from the
-        # matrix)
-        rows, cols = _to_owners(K, *self.faults.pattern())
+        # rebuilt with the pattern of the terms' blocks (a fault's bubbles reach beyond the cells' closures: a face's
+        # row reaches the plus cell's fourth vertex, a cell's rows the multipliers of its faces, a face's row those
+        # of the faces sharing a cell) and block size 3 (every point carries 3, 6 or 3k dofs: AMG reads the block
+        # size from the matrix)
+        pairs = [term.pattern() for term in self.terms]
+        rows, cols = _to_owners(K, np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs]))
         K1 = _extend_pattern(K, rows, cols, bs=3)
         K.destroy()
         return K1
@@ -134,112 +136,113 @@ class Equations:
         self.dm.restoreLocalVec(lv)
         return a
 
-    # -- geostatic initial state ---------------------------------------------------------------
-    def glued_operator(self) -> Any:
-        """The operator of the elastic gravity solve: K, with every fault face glued (no jump) while it forms."""
-        if self.faults is None:
+    # -- the terms' histories and configurations --------------------------------------------------
+    def initial_histories(self) -> tuple:
+        return tuple(term.initial_history() for term in self.terms)
+
+    def begin_step(self, x: Any, histories: tuple) -> tuple:
+        """The terms' histories with the converged state x (under the loads last set: those it was solved for)
+        as the start of a solve."""
+        x_loc = self.local_array(x)
+        return tuple(term.begin_step(x_loc, load, h)
+                     for term, load, h in zip(self.terms, self.loads.term_loads, histories))
+
+    def configuration(self, x: Any, histories: tuple, exact: bool = True) -> tuple:
+        """Each term's configuration at x (``exact``: the branches the residual takes; else as reported)."""
+        x_loc = self.local_array(x)
+        return tuple(term.configuration(x_loc, load, h, exact)
+                     for term, load, h in zip(self.terms, self.loads.term_loads, histories))
+
+    def trial_configuration(self, histories: tuple) -> tuple:
+        return tuple(term.trial_configuration(h) for term, h in zip(self.terms, histories))
+
+    # -- the initial gravity state -------------------------------------------------------------
+    def initial_operator(self) -> Any:
+        """The operator of the elastic gravity solve: K, with the terms' blocks of the initial state (every fault
+        face glued, no jump, while it forms)."""
+        if self.linear:
             return self.K
         A = self.J
         self.K.copy(A, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        self.faults.add_glued(A, self.dofmap.n_local)
+        config = tuple(term.add_initial_operator(A, self.dofmap.n_local) for term in self.terms)
         A.assemble()
-        self._jacobian_key = None
-        if not self.faults.jacobian_varies(np.full(self.faults.faces.nf, ct.STICK)):
-            # the Jacobian of every face stuck: a first step that starts so keeps this factorisation
-            self._jacobian_key = np.full(self.faults.faces.nf, ct.STICK)
+        # a first step that starts in this configuration keeps this factorisation
+        varies = any(term.jacobian_varies(c) for term, c in zip(self.terms, config))
+        self._jacobian_key = None if varies else _flat(config)
         return A
 
-    def geostatic_stress(self, u_gravity_local: np.ndarray) -> np.ndarray:
-        """The initial stress (cells x 3 x 3, Pa) from the elastic gravity state: its vertical stress (the
-        overburden in flat layers, the arching around stiff bodies), horizontal stresses by the K0 rule on
-        effective stresses, sigma'_h = K0 sigma'_v, with hydrostatic pore pressure below the water table (K0 =
-        -pfault_geostatic_k0, default nu/(1-nu) of each material); no initial shear."""
-        s = self.settings
-        sig = self.effective_stress(u_gravity_local)
-        z = self.asm.centroids[:, 2]
-        p0 = s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
-        alpha = self.asm.alpha
-        nu = self.asm.lam / (2 * (self.asm.lam + self.asm.mu))
-        k0 = np.full(len(z), s.k0) if s.k0 >= 0 else nu / (1 - nu)
-        sv = sig[:, 2, 2]
-        sh = k0 * (sv + alpha * p0) - alpha * p0
-        sigma0 = np.zeros_like(sig)
-        sigma0[:, 0, 0] = sigma0[:, 1, 1] = sh
-        sigma0[:, 2, 2] = sv
-        return sigma0
-
-    def effective_stress(self, u_local: np.ndarray) -> np.ndarray:
+    def effective_stress(self, u_local: np.ndarray, histories: tuple, loads: tuple | None = None) -> np.ndarray:
         """Incremental effective stress C:eps per cell (nc, 3, 3), its mean over the cell: of the P1 displacements
-        of ``u_local`` and, in the cells beside a fault face, of the face bubbles recovered from u_local (its
-        multipliers) under the bubbles' load last set."""
+        of ``u_local`` and of the strain the terms add (a fault's face bubbles in the cells beside it, recovered
+        from u_local's multipliers under the terms' ``loads``, by default those last set)."""
         sig = self.asm.effective_stress(u_local)
-        if self.faults is not None:
-            f = self.faults
-            cells = f.bubbles.cell
-            eps = f.bubbles.cell_strain(u_local, f.tractions(u_local) - f.t0)
+        loads = self.loads.term_loads if loads is None else loads
+        for term, load, h in zip(self.terms, loads, histories):
+            cells, eps = term.cell_strain(u_local, load, h)
             sig[cells] += el.stress(eps, self.asm.lam[cells], self.asm.mu[cells])
         return sig
 
-    def cell_total_stress(self, u_local: np.ndarray, dp: np.ndarray, sigma0: np.ndarray | None) -> np.ndarray:
+    def cell_total_stress(self, u_local: np.ndarray, dp: np.ndarray, sigma0: np.ndarray | None,
+                          histories: tuple, loads: tuple | None = None) -> np.ndarray:
         """Total stress per cell: initial + C:eps(u) - alpha dp I (dp per cell, Pa; ``Loads.cell_dp``), with the
-        face bubbles' strain in the cells beside a fault (``effective_stress``)."""
-        sig = self.effective_stress(u_local)
+        terms' strain (``effective_stress``)."""
+        sig = self.effective_stress(u_local, histories, loads)
         if sigma0 is not None:
             sig = sig + sigma0
         return sig - (self.asm.alpha * dp)[:, None, None] * np.eye(3)
 
     # -- residual and Jacobian -----------------------------------------------------------------
-    @contextmanager
-    def fixed_states(self, states: np.ndarray) -> Iterator[None]:
-        """Residual and Jacobian evaluated with the faces in ``states`` instead of those their laws read from
-        the iterate (a step's elastic trial)."""
-        self._states = states
-        try:
-            yield
-        finally:
-            self._states = None
-
-    def residual(self, snes: Any, x: Any, F: Any) -> None:
-        """F(x) (an SNES function callback)."""
+    def residual(self, x: Any, F: Any, histories: tuple, config: tuple | None = None) -> None:
+        """F(x) given the terms' histories; ``config``: the terms' configurations to take instead of those read
+        from x (a step's elastic trial)."""
         self._log_residual.begin()
         self.K.mult(x, F)
         F.axpy(-1.0, self.loads.f)
-        if self.faults is not None:
+        if self.terms:
             out = np.zeros(self.dofmap.n_local)
-            self.faults.residual(self.local_array(x), out, self._states)
+            x_loc = self.local_array(x)
+            for k, (term, load, h) in enumerate(zip(self.terms, self.loads.term_loads, histories)):
+                term.residual(x_loc, load, h, out, None if config is None else config[k])
             g = self.to_global(out)
             F.axpy(1.0, g)
             g.destroy()
         self._log_residual.end()
 
-    def assemble_jacobian(self, x: Any, J: Any) -> np.ndarray | None:
-        """K plus the interface blocks at x into J. While every face sticks or is open (no slip, no penalty face)
-        the Jacobian depends on the faces' states only: an unchanged configuration leaves J untouched. Returns
-        the faces' states of a newly assembled J, None when J was kept (or there are no faults)."""
-        if self.faults is None:
-            return None      # linear skeleton: K is assembled once
+    def assemble_jacobian(self, x: Any, J: Any, histories: tuple, config: tuple | None = None) -> np.ndarray | None:
+        """K plus the terms' blocks at x into J. While the terms' Jacobian depends on their configuration only (no
+        slipping fault face) an unchanged configuration leaves J untouched. Returns the configuration of a newly
+        assembled J (the terms' concatenated), None when J was kept (and when there is no term)."""
+        if self.linear:
+            return None      # K is assembled once
         self._log_jacobian.begin()
-        f = self.faults
         x_loc = self.local_array(x)
-        state = f.states(x_loc, exact=True) if self._states is None else self._states
-        varies = f.jacobian_varies(state)
-        key = self._jacobian_key
-        same = key is not None and not varies and np.array_equal(key, state)
+        loads = self.loads.term_loads
+        state = config if config is not None else tuple(
+            term.configuration(x_loc, load, h) for term, load, h in zip(self.terms, loads, histories))
+        varies = any(term.jacobian_varies(c) for term, c in zip(self.terms, state))
+        flat, key = _flat(state), self._jacobian_key
+        same = key is not None and not varies and np.array_equal(key, flat)
         if self.comm.tompi4py().allreduce(same, op=MPI.LAND):
             self._log_jacobian.end()
             return None
         self.K.copy(J, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        f.add_jacobian(x_loc, J, self._states)
+        for k, (term, load, h) in enumerate(zip(self.terms, loads, histories)):
+            term.add_jacobian(x_loc, load, h, J, None if config is None else config[k])
         J.assemble()
-        self._jacobian_key = None if varies else state
+        self._jacobian_key = None if varies else flat
         self.n_jacobians += 1
         self._log_jacobian.end()
-        return state
+        return flat
 
     def destroy(self) -> None:
         self.loads.destroy()
         for obj in {id(o): o for o in (self.K, self.J, self.nullspace)}.values():
             obj.destroy()
+
+
+def _flat(config: tuple) -> np.ndarray:
+    """The terms' configurations as one array."""
+    return np.concatenate(config) if config else np.zeros(0, np.int64)
 
 
 def _to_owners(K: Any, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

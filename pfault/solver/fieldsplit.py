@@ -34,12 +34,10 @@ class FieldSplit:
         self.objects: list = []
         if pc.getType() != PETSc.PC.Type.FIELDSPLIT:
             return
-        f = equations.faults
-        if f is None:
+        if LAGRANGE not in equations.dofmap.fields:
             _displacement_only(pc)
             return
-        loc = np.zeros(equations.dofmap.n_local)
-        loc[f.faces.lm_dofs.ravel()] = 1.0
+        loc = equations.dofmap.field_mask(LAGRANGE).astype(float)
         g = equations.to_global(loc, PETSc.InsertMode.INSERT_VALUES)
         start, _ = g.getOwnershipRange()
         mark = g.getArray() > 0.5

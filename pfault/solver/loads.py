@@ -1,6 +1,7 @@
 """The load vector f(t) of the equations: the pore-pressure change of the source (Terzaghi/Biot), boundary
 tractions and prescribed displacements scaled by their histories, loads that do not change in time, and the
-pore pressure the fault laws see; the gravity load of a geostatic initial state."""
+loads of the equations' terms (pfault.solver.terms: the face bubbles' loads and the pore pressure a fault's laws
+see); the gravity load of a geostatic initial state."""
 
 from __future__ import annotations
 
@@ -14,12 +15,13 @@ from ..effects import logged
 
 class Loads:
     """The loads of ``equations`` (pfault.solver.equations.Equations, whose K is not yet constrained: the lifts
-    of prescribed displacements are -K g). ``f`` holds the load of the time last set (``set``);
-    ``static_local`` loads that do not change in time (a local array: body forces of a verification case)."""
+    of prescribed displacements are -K g). ``f`` holds the load of the time last set (``set``) and
+    ``term_loads`` the terms' loads of that time (one per term, in order); ``static_local`` loads that do not
+    change in time (a local array: body forces of a verification case)."""
 
-    def __init__(self, equations: Any, boundaries: list, source: Any, settings: Any, contact: Any) -> None:
+    def __init__(self, equations: Any, boundaries: list, source: Any, settings: Any) -> None:
         eq = self.eq = equations
-        self.source, self.settings, self.contact = source, settings, contact
+        self.source, self.settings = source, settings
         self.mesh, self.dofmap, self.asm = eq.mesh, eq.dofmap, eq.asm
         self.f = eq.create_vec()
         self.static_local = np.zeros(eq.dofmap.n_local)
@@ -34,6 +36,8 @@ class Loads:
                     tr = [bb.traction if j == i else (0.0, 0.0, 0.0) for j, bb in enumerate(boundaries)]
                     eq.asm.traction_load(tr, loc)
                     self.surface_loads.append((b, loc))
+        scratch = np.zeros(eq.dofmap.n_local)
+        self.term_loads = tuple(term.load(0.0, None, self.asm.alpha, scratch) for term in eq.terms)  # none yet
 
     def _prescribed_displacements(self, boundaries: list) -> list:
         """For each displacement boundary: (boundary, g on its constrained dofs, lift = -K g) as global Vecs."""
@@ -64,20 +68,17 @@ class Loads:
         return self.source.cell_dp(t)
 
     def set(self, t: float) -> None:
-        """The load f(t) and, with faults, the pore pressure their laws see at t."""
+        """The load f(t) and the terms' loads at t."""
         bc = self.eq.bc_local_owned
         loc = self.static_local.copy()
         for b, fl in self.surface_loads:
             loc += b.scale(t) * fl
-        faults = self.eq.faults
+        dp = None
         if self.source.active:
             with logged("pfaultPorePressureLoad"):
                 dp = self.source.cell_dp(t)
                 self.asm.pore_pressure_load(dp, loc)
-                if faults is not None:      # the Biot load of the face bubbles (alpha dp div(phi) is not zero)
-                    faults.set_bubble_load(faults.bubbles.pore_pressure_load(self.asm.alpha * dp), loc)
-        elif faults is not None:
-            faults.set_bubble_load(np.zeros_like(faults.bubbles.fb), loc)
+        self.term_loads = tuple(term.load(t, dp, self.asm.alpha, loc) for term in self.eq.terms)
         self.eq.to_global(loc, out=self.f)
         for b, g, lift in self.lifts:
             self.f.axpy(b.scale(t), lift)
@@ -85,41 +86,18 @@ class Loads:
         arr[bc] = 0.0
         for b, g, lift in self.lifts:
             arr[bc] += b.scale(t) * g.getArray()[bc]
-        if self.eq.faults is not None:
-            self.eq.faults.set_pore_pressure(self.face_pore_pressure(t))
 
-    def face_pore_pressure(self, t: float) -> np.ndarray:
-        """alpha p at the owned fault faces (Pa): the hydrostatic pressure below the water table at the face
-        centroid when the scene starts from the geostatic state, plus the change at time t (minus cell).
-
-        In a geostatic scene p is the absolute pressure, and it is clamped at zero unless
-        ``-pfault_contact_suction``: a fault face above the lowered water table is dry. Without the geostatic
-        state p is only the change from an unknown initial pressure, and it is used as it is."""
-        f = self.eq.faults
-        if not self.contact.effective_stress or not f.faces.nf:
-            return np.zeros(f.faces.nf)
-        s = self.settings
-        p = np.zeros(f.faces.nf)
-        if s.geostatic:
-            z = self.mesh.coords[f.faces.verts][:, :, 2].mean(axis=1)
-            p += s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
-        if self.source.active and t > 0:
-            p += self.source.cell_dp(t)[f.faces.cell]
-        if s.geostatic and not self.contact.suction:
-            p = np.maximum(p, 0.0)
-        return self.asm.alpha[f.faces.cell] * p
-
-    def gravity(self, out: Any, with_faults: bool = True) -> None:
-        """The gravity load vector (zero on constrained dofs) into ``out``; with faults, that of the glued faces'
-        bubbles too (their condensed load and the right-hand side of the glued faces' rows)."""
+    def gravity(self, out: Any, with_terms: bool = True) -> None:
+        """The gravity load vector (zero on constrained dofs) into ``out``; ``with_terms``: with the terms' loads of
+        the initial gravity state (a fault's glued faces' bubbles: their condensed load and the right-hand side of
+        their rows), which become the terms' loads."""
         grav = np.zeros(self.dofmap.n_local)
         self.asm.gravity_load(self.settings.gravity, grav)
-        faults = self.eq.faults
-        if faults is not None and with_faults:
+        if with_terms:
             b = np.zeros((len(self.asm.vol), 3))
             b[:, 2] = -self.asm.density * self.settings.gravity
-            faults.set_bubble_load(faults.bubbles.body_load(b), grav)
-            faults.glued_load(grav)
+            self.term_loads = tuple(term.gravity_load(b, load, grav)
+                                    for term, load in zip(self.eq.terms, self.term_loads))
         self.eq.to_global(grav, out=out)
         out.getArray()[self.eq.bc_local_owned] = 0.0
 
@@ -129,7 +107,7 @@ class Loads:
             self._gravity_norm = 0.0
             if self.settings.geostatic:
                 g = self.eq.create_vec()
-                self.gravity(g, with_faults=False)      # (a scale: the bubbles' load stays the step's)
+                self.gravity(g, with_terms=False)      # (a scale: the terms' loads stay the step's)
                 self._gravity_norm = g.norm()
                 g.destroy()
         return self._gravity_norm

@@ -26,6 +26,7 @@ The policy's constants, each measured where it was chosen:
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any, Callable
 
 import numpy as np
@@ -33,7 +34,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..effects import event_total
-from ..errors import StepNotConverged
+from ..records import Solve, SolveCost
 from ..petsc_compat import set_lag_preconditioner
 from .fieldsplit import FieldSplit
 from .setup import apply_solver_defaults, is_direct
@@ -153,41 +154,41 @@ def factorisation_cost(ksp: Any) -> float | None:
 
 class StepSolver:
     """Solves the equations for one time after another, advancing ``state``: owns the SNES (created once, code
-    defaults where the user is silent, then -snes_*/-ksp_*/-pc_* options), the fault steps' tolerances and
-    predictor, and a direct solver's factor reuse. ``monitor``: print the faces' states at every Newton
+    defaults where the user is silent, then -snes_*/-ksp_*/-pc_* options), the nonlinear steps' tolerances and
+    predictor, and a direct solver's factor reuse. ``monitor``: print the terms' configurations at every Newton
     iterate (-pfault_contact_monitor)."""
 
     def __init__(self, equations: Any, state: Any, geostatic: bool = False, monitor: bool = False) -> None:
         self.eq, self.state = equations, state
-        self.faults = faults = equations.faults
         self.comm = equations.comm
         self.monitor = monitor
         self.F = equations.create_vec()
         self.reuse: FactorReuse | None = None
         self._monitor_state = None
-        if faults is not None:
+        nonlinear = not equations.linear
+        if nonlinear:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
-        apply_solver_defaults(linear=faults is None)
+        apply_solver_defaults(linear=equations.linear)
         opts = PETSc.Options()
         self._atol_user, self._ksp_atol_user = opts.hasName("snes_atol"), opts.hasName("ksp_atol")
         self.snes = snes = PETSc.SNES().create(comm=self.comm)
         snes.setDM(equations.dm)
         snes.getKSP().setDMActive(False)
-        snes.setFunction(equations.residual, self.F)
+        snes.setFunction(self._residual, self.F)
         snes.setJacobian(self._jacobian, equations.J, equations.J)
         snes.setFromOptions()
         self.split = FieldSplit(equations, snes.getKSP().getPC())
-        if faults is not None:
+        if nonlinear:
             snes.setConvergenceHistory()
             if monitor:
                 snes.setMonitor(self._print_states)
         snes.setUp()
         ksp = snes.getKSP()
         ksp.setOperators(equations.J, equations.J)
-        if faults is not None:
+        if nonlinear:
             if is_direct() and ksp.getType() != "preonly":
                 self.reuse = FactorReuse(self.comm, ksp)
-            faults.begin_step(equations.local_array(state.u))
+            state.histories = equations.begin_step(state.u, state.histories)
             if geostatic:
                 # the glued gravity solve (geostatic) sets the solver up on its own operator first: a
                 # factorisation of this Jacobian would be discarded (paper-size Queretaro: 3-4.5 s)
@@ -196,14 +197,18 @@ class StepSolver:
         ksp.setUp()
 
     # -- callbacks -------------------------------------------------------------------------------
-    def _jacobian(self, snes: Any, x: Any, J: Any, P: Any) -> None:
-        states = self.eq.assemble_jacobian(x, J)
+    def _residual(self, snes: Any, x: Any, F: Any) -> None:
+        self.eq.residual(x, F, self.state.histories)
+
+    def _jacobian(self, snes: Any, x: Any, J: Any, P: Any, config: tuple | None = None) -> None:
+        states = self.eq.assemble_jacobian(x, J, self.state.histories, config)
         if states is not None and self.reuse is not None:
             self.reuse.decide(snes, states)
 
     def _print_states(self, snes: Any, its: int, fnorm: float) -> None:
-        """-pfault_contact_monitor: the faces' states at each Newton iterate and how many changed."""
-        st = self.faults.states(self.eq.local_array(snes.getSolution()))
+        """-pfault_contact_monitor: the terms' configurations at each Newton iterate (a fault's faces stuck,
+        slipping and open) and how many changed."""
+        st = np.concatenate(self.eq.configuration(snes.getSolution(), self.state.histories, exact=False))
         mpi = self.comm.tompi4py()
         c = mpi.allreduce(np.bincount(st, minlength=3), op=MPI.SUM)
         prev = self._monitor_state if its > 0 else st
@@ -212,95 +217,65 @@ class StepSolver:
         PETSc.Sys.Print(f"  newton {its:2d}  |F| {fnorm:.3e}  stick/slip/open {c[0]}/{c[1]}/{c[2]}"
                         + (f"  ({changed} faces changed state)" if its else ""))
 
-    # -- the geostatic initial state ---------------------------------------------------------------
-    def geostatic(self) -> None:
-        """The geostatic initial stress, in equilibrium with zero displacement: an elastic gravity solve with the
-        faults glued (Equations.geostatic_stress says what is made of it). The state loads nothing:
-        displacements are those caused by the drawdown, and stresses and fault tractions are the initial ones
-        plus the changes; the faults' tractions start from it."""
-        eq, state, faults = self.eq, self.state, self.faults
-        eq.loads.gravity(eq.loads.f)
-        ug = state.u.duplicate()
+    # -- linear solves ---------------------------------------------------------------------------------
+    def solve_linear(self, A: Any, b: Any, x: Any) -> int:
+        """Solve A x = b with the step's KSP and preconditioner (the initial gravity state); returns KSP's
+        converged reason."""
         ksp = self.snes.getKSP()
-        A = eq.glued_operator()
         ksp.setOperators(A, A)
-        ksp.solve(eq.loads.f, ug)
-        reason = ksp.getConvergedReason()
-        norm = ug.norm()
-        if reason <= 0 or not np.isfinite(norm):
-            # the initial stress would come from a wrong state: faults open at step 0, every step loaded by it
-            ug.destroy()
-            why = f"KSP reason {reason}" if reason <= 0 else "a non-finite solution"
-            raise StepNotConverged(f"-pfault_geostatic: the elastic gravity solve of the initial stress failed "
-                                   f"({why}); check the solver options (-pfault_solver, -ksp_*, -pc_*) or start "
-                                   f"without it (-pfault_geostatic false)")
-        state.sigma0 = eq.geostatic_stress(eq.local_array(ug))
-        ug.destroy()
-        eq.loads.set(0.0)       # the face bubbles' load back from gravity's to that of the start
-        state.u.set(0.0)
-        if faults is not None:
-            # set once (the glued operator and the gravity load do not depend on it), before the laws start
-            faults.set_pore_pressure(eq.loads.face_pore_pressure(0.0))
-            faults.t0 = faults.initial_tractions(state.sigma0)
-            loc = eq.local_array(state.u)
-            loc[faults.faces.lm_dofs] = faults.t0
-            eq.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=state.u)
-            faults.start_from(loc, faults.t0)     # penalty faces too: their shear starts from the initial one
+        ksp.solve(b, x)
+        return int(ksp.getConvergedReason())
 
     # -- one step ------------------------------------------------------------------------------------
-    def solve_step(self, t: float) -> dict:
-        """Solve for time t from the converged state (at state.time); returns the step record. With faults SNES
-        runs the semismooth Newton from the step's predictor (``predict``)."""
-        eq, state, snes, faults = self.eq, self.state, self.snes, self.faults
+    def solve_step(self, t: float) -> Solve:
+        """Solve for time t from the converged state (at state.time). Nonlinear equations: SNES runs the
+        semismooth Newton from the step's predictor (``predict``)."""
+        eq, state, snes = self.eq, self.state, self.snes
+        nonlinear = not eq.linear
         t0 = time.perf_counter()
-        nfact, njac = (factorizations() if faults is not None else 0), eq.n_jacobians
+        nfact, njac = (factorizations() if nonlinear else 0), eq.n_jacobians
         if self.reuse is not None:
             self.reuse.begin_step()
         trial = start = None
-        if faults is not None:
-            faults.begin_step(eq.local_array(state.u))     # under the pore pressure it was solved for
+        if nonlinear:
+            state.histories = eq.begin_step(state.u, state.histories)    # under the loads it was solved for
             start = state.u.copy()
         eq.loads.set(t)
-        if faults is not None:
+        if nonlinear:
             self.load_tolerance()
             trial = self.predict(t)
             snes.setConvergenceHistory(reset=True)
         snes.solve(None, state.u)
         reason = snes.getConvergedReason()
         its = int(snes.getIterationNumber())
-        rec = {"time_s": float(t), "newton_its": its, "ksp_its": int(snes.getLinearSolveIterations()),
-               "wall_s": time.perf_counter() - t0, "converged": bool(reason > 0), "reason": int(reason)}
-        if faults is not None:
-            rec.update(self._fault_record(its, trial, nfact, njac))
-        rec["ksp_per_newton"] = rec["ksp_its"] / rec["newton_its"] if rec["newton_its"] else 0.0
-        if rec["converged"]:
+        cost = SolveCost(its, int(snes.getLinearSolveIterations()), time.perf_counter() - t0)
+        out = Solve(float(t), bool(reason > 0), int(reason), cost)
+        if nonlinear:
+            out = self._nonlinear_record(out, trial, nfact, njac)
+        if out.converged:
             if start is not None and t > state.time:
                 # (a solve again at the same time, after faces broke, keeps the predictor's history)
                 state.set_previous(state.time, start)
             state.time = float(t)
         if start is not None:
             start.destroy()
-        return rec
+        return out
 
-    def _fault_record(self, its: int, trial: tuple | None, nfact: int, njac: int) -> dict:
-        snes = self.snes
-        history = [float(v) for v in snes.getConvergenceHistory()[0][:its + 1]]
-        rec: dict = {"newton_its": its, "ksp_its": int(snes.getLinearSolveIterations())}
-        if trial is None:
-            rec["predictor"] = "extrapolated"
-        else:
-            rec["predictor"] = "elastic trial"
-            rec["newton_its"] += 1
-            rec["ksp_its"] += trial[1]
-            history = [trial[0]] + history
-        rec["factorizations"] = int(factorizations() - nfact)
-        rec["jacobians"] = int(self.eq.n_jacobians - njac)
-        rec["residual_history"] = history
-        rec["atol"] = float(snes.getTolerances()[1])
-        if self.reuse is not None and self.reuse.step_null_pivots:
-            rec["null_pivots"] = int(self.reuse.step_null_pivots)
-        rec.update(self.faults.counts_by_state(self.eq.local_array(self.state.u)))
-        return rec
+    def _nonlinear_record(self, out: Solve, trial: tuple | None, nfact: int, njac: int) -> Solve:
+        snes, c = self.snes, out.cost
+        history = tuple(float(v) for v in snes.getConvergenceHistory()[0][:c.newton_its + 1])
+        newton, krylov, predictor = c.newton_its, c.ksp_its, "extrapolated"
+        if trial is not None:
+            predictor = "elastic trial"
+            newton, krylov, history = newton + 1, krylov + trial[1], (trial[0],) + history
+        cost = replace(c, newton_its=newton, ksp_its=krylov, factorizations=int(factorizations() - nfact),
+                       jacobians=int(self.eq.n_jacobians - njac), residual_history=history)
+        pivots = self.reuse.step_null_pivots if self.reuse is not None else 0
+        config = np.concatenate(self.eq.configuration(self.state.u, self.state.histories, exact=False))
+        counts = self.comm.tompi4py().allreduce(np.bincount(config, minlength=3), op=MPI.SUM)
+        return replace(out, cost=cost, nonlinear=True, predictor=predictor, atol=float(snes.getTolerances()[1]),
+                       null_pivots=int(pivots), counts={"stick": int(counts[0]), "slip": int(counts[1]),
+                                                         "open": int(counts[2])})
 
     def predict(self, t: float) -> tuple | None:
         """Move state.u to the step's predictor and return None, or do the elastic trial and return what it
@@ -315,11 +290,11 @@ class StepSolver:
         ratio = (t - state.time) / (state.time - t_a)
         u_n = state.u.copy()
         try:
-            eq.residual(self.snes, state.u, self.F)
+            self._residual(self.snes, state.u, self.F)
             f_start = self.F.norm()
             state.u.axpy(ratio, u_n)
             state.u.axpy(-ratio, u_a)
-            eq.residual(self.snes, state.u, self.F)
+            self._residual(self.snes, state.u, self.F)
             f_pred = self.F.norm()
             if f_pred < f_start:
                 if self.monitor:
@@ -334,10 +309,10 @@ class StepSolver:
         return self.elastic_trial()
 
     def elastic_trial(self) -> tuple:
-        """Move state.u to the step's elastic trial: the load increment carried with every closed face stuck and
-        every open face open (the states the step starts in); returns (|F| before, Krylov iterations). The
-        semismooth Newton then starts from a state where the increment has been carried elastically, not from
-        the last one with the new pore pressure's jump in the faces' effective tractions.
+        """Move state.u to the step's elastic trial: the load increment carried in the configuration the step
+        starts in (a fault's closed faces stuck, its open faces open); returns (|F| before, Krylov iterations).
+        The semismooth Newton then starts from a state where the increment has been carried elastically, not
+        from the last one with the new pore pressure's jump in the faces' effective tractions.
 
         A trial whose linear solve fails (a singular Jacobian: part of the body held by nothing but open faces)
         leaves u where it was: its iterate is whatever the Krylov method reached, and Newton from there could
@@ -345,18 +320,18 @@ class StepSolver:
         a trial stopped after SINGULAR_MAX_IT iterations, or failed, depending on the round-off in that
         iterate)."""
         eq, u = self.eq, self.state.u
-        with eq.fixed_states(self.faults.start.trial()):
-            eq.residual(self.snes, u, self.F)
-            fnorm = self.F.norm()
-            self._jacobian(self.snes, u, eq.J, eq.J)
-            ksp = self.snes.getKSP()
-            ksp.setOperators(eq.J, eq.J)
-            du = u.duplicate()
-            ksp.solve(self.F, du)
-            if ksp.getConvergedReason() > 0:
-                u.axpy(-1.0, du)
-            du.destroy()
-            return fnorm, int(ksp.getIterationNumber())
+        config = eq.trial_configuration(self.state.histories)
+        eq.residual(u, self.F, self.state.histories, config)
+        fnorm = self.F.norm()
+        self._jacobian(self.snes, u, eq.J, eq.J, config)
+        ksp = self.snes.getKSP()
+        ksp.setOperators(eq.J, eq.J)
+        du = u.duplicate()
+        ksp.solve(self.F, du)
+        if ksp.getConvergedReason() > 0:
+            u.axpy(-1.0, du)
+        du.destroy()
+        return fnorm, int(ksp.getIterationNumber())
 
     def load_tolerance(self) -> None:
         """Unless -snes_atol is given: a step also converges once |F| <= -snes_rtol times the forces of the
@@ -384,11 +359,10 @@ class StepSolver:
         ksp.setTolerances(atol=KSP_ATOL_FRACTION * snes.getTolerances()[1])
 
     # -- a time interval -----------------------------------------------------------------------------
-    def solve_interval(self, t_prev: float, t: float, max_cuts: int = 0) -> dict:
-        """Advance from t_prev to t (the pore-pressure source already advanced to t); a fault step that does not
-        converge is cut (``cut_step``)."""
-        return cut_step(self.solve_step, self.state.u, t_prev, t, max_cuts if self.faults is not None else 0,
-                        self.monitor)
+    def solve_interval(self, t_prev: float, t: float, max_cuts: int = 0) -> Solve:
+        """Advance from t_prev to t (the pore-pressure source already advanced to t); a nonlinear step that does
+        not converge is cut (``cut_step``)."""
+        return cut_step(self.solve_step, self.state, t_prev, t, 0 if self.eq.linear else max_cuts, self.monitor)
 
     def ksp_types(self) -> tuple[str, str]:
         ksp = self.snes.getKSP()
@@ -400,51 +374,37 @@ class StepSolver:
         self.F.destroy()
 
 
-COST_KEYS = ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians")
-
-
-def combined_cost(records: list[dict]) -> dict:
-    """The cost of one step solved in several solves (sub-steps, or solves again at its time after faces broke):
-    the records' iterations, wall time, factorisations and Jacobians summed, Krylov iterations per Newton
-    iteration over them, and their residual histories in order."""
-    out: dict = {key: sum(r.get(key, 0) for r in records) for key in COST_KEYS}
-    out["ksp_per_newton"] = out["ksp_its"] / out["newton_its"] if out["newton_its"] else 0.0
-    out["residual_history"] = [h for r in records for h in r.get("residual_history", [])]
-    return out
-
-
-def cut_step(solve_step: Callable[[float], dict], u: Any, t_prev: float, t: float, max_cuts: int,
-             verbose: bool = False) -> dict:
-    """Advance from t_prev to t with ``solve_step``. A step whose Newton solve does not converge is retried from
-    the state u had at t_prev as 2, 4, ... equal sub-steps (up to max_cuts halvings); the pore-pressure source
-    gives each sub-step's pressure (a flow model's is interpolated linearly in time within the interval).
-    Returns the record of the interval: the last attempt's, with the iterations and times of every attempt."""
-    u0 = u.duplicate()
-    u.copy(u0)
-    rec = solve_step(t)
-    if rec["converged"] or max_cuts <= 0:
-        u0.destroy()
-        return rec
-    tried = [rec]
-    cuts = 0
+def cut_step(solve_step: Callable[[float], Solve], state: Any, t_prev: float, t: float, max_cuts: int,
+             verbose: bool = False) -> Solve:
+    """Advance ``state`` from t_prev to t with ``solve_step``. A step whose Newton solve does not converge is
+    retried from the state at t_prev (a snapshot: solution, time, predictor's history, histories) as 2, 4, ...
+    equal sub-steps (up to max_cuts halvings); the pore-pressure source gives each sub-step's pressure (a flow
+    model's is interpolated linearly in time within the interval). Returns the interval's solve: the last
+    attempt's outcome, with the iterations and times of every attempt."""
+    if max_cuts <= 0:
+        return solve_step(t)
+    before = state.snapshot()
     try:
-        while not rec["converged"] and cuts < max_cuts:
+        out = solve_step(t)
+        if out.converged:
+            return out
+        tried = [out]
+        cuts = 0
+        while not out.converged and cuts < max_cuts:
             cuts += 1
             n = 2 ** cuts
-            u0.copy(u)
+            state.restore(before)
             if verbose:
-                PETSc.Sys.Print(f"  step not converged ({rec['reason']}): retrying as {n} sub-steps")
+                PETSc.Sys.Print(f"  step not converged ({out.reason}): retrying as {n} sub-steps")
             for k in range(1, n + 1):
-                rec = solve_step(t_prev + (t - t_prev) * k / n)
-                tried.append(rec)
-                if not rec["converged"]:
+                out = solve_step(t_prev + (t - t_prev) * k / n)
+                tried.append(out)
+                if not out.converged:
                     break
     finally:
-        u0.destroy()
-    rec = {**rec, **combined_cost(tried)}
-    rec["time_s"] = float(t)
-    rec["substeps"] = 2 ** cuts
-    pivots = max(r.get("null_pivots", 0) for r in tried)
-    if pivots:
-        rec["null_pivots"] = pivots
-    return rec
+        before.destroy()
+    cost = tried[0].cost
+    for r in tried[1:]:
+        cost = cost + r.cost
+    return replace(out, cost=cost, time_s=float(t), substeps=2 ** cuts,
+                   null_pivots=max(r.null_pivots for r in tried))

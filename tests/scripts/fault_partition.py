@@ -7,7 +7,7 @@ command line).
 
 Prints JSON {"ranks": N, "faces_per_rank": [...], "fault_faces": total, "cell_ranks": [...]} (cell_ranks: the
 rank of each cell, in serial order). A face belongs to the rank that owns its minus cell
-(pfault.faults.interface.FaultInterface); the 2-rank fault tests need faces on every rank.
+(pfault.faults.term.FaultTerm); the 2-rank fault tests need faces on every rank.
 """
 import json
 import sys
@@ -25,7 +25,7 @@ from petsc4py import PETSc  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 sim = Simulation(SCENE, sys.argv)
-faults = sim.model.faults
+faults = sim.model.equations.terms[0]
 counts = [int(c) for c in faults.faces.mpi.allgather(faults.faces.nf)]
 mesh = sim.model.mesh
 owned = faults.faces.mpi.gather(mesh.cell_serial)      # (no overlap: every local cell is owned)

@@ -23,15 +23,15 @@ from petsc4py import PETSc  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 sim = Simulation("config/two_blocks.opts", sys.argv)
-p, f = sim.model.equations, sim.model.faults
-f.begin_step(p.local_array(sim.state.u))
-p.assemble_jacobian(sim.state.u, p.J)
+p, f = sim.model.equations, sim.model.equations.terms[0]
+sim.state.histories = p.begin_step(sim.state.u, sim.state.histories)
+p.assemble_jacobian(sim.state.u, p.J, sim.state.histories)
 J = p.J.convert("dense").getDenseArray().copy()
 loc = np.zeros(sim.model.dofmap.n_local)
 loc[f.faces.lm_dofs.ravel()] = 1.0
 mark = p.to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray() > 0.5
 # the constraint rows of stuck faces are -c (A g): divide each row by its -c
-loc[f.faces.lm_dofs] = -np.column_stack([f.law.c_n, f.law.c_t, f.law.c_t])
+loc[f.faces.lm_dofs] = -np.column_stack([f.laws.lagrange.c_n, f.laws.lagrange.c_t, f.laws.lagrange.c_t])
 rowscale = p.to_global(loc, PETSc.InsertMode.INSERT_VALUES).getArray()
 J[mark] /= rowscale[mark, None]
 bc = np.zeros(len(mark), bool)

@@ -20,6 +20,7 @@ faces stuck beside broken ones stuck, slipping and open). Prints one JSON line
 {case: {e1, e2, order1, order2, states, ...}}.
 """
 import json
+from dataclasses import replace
 import sys
 
 import petsc4py
@@ -38,7 +39,7 @@ from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 
 from pfault.faults import contact as ct  # noqa: E402
-from pfault.faults.interface import StepStart  # noqa: E402
+from pfault.faults.history import StepStart  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 H = (1e-2, 1e-3, 1e-4)
@@ -49,7 +50,7 @@ COMM = PETSc.COMM_WORLD
 def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noise=1e5):
     """x: small random displacement + a uniform jump `offset` (global) of the plus side of the fault, random
     multipliers around t_mean (one row, or one row per owned face); v: random, zero on Dirichlet rows."""
-    p, f, dm = sim.model.equations, sim.model.faults, sim.model.dofmap
+    p, f, dm = sim.model.equations, sim.model.equations.terms[0], sim.model.dofmap
     x = sim.state.u.duplicate()
     v = sim.state.u.duplicate()
     rstart, rend = x.getOwnershipRange()
@@ -73,22 +74,22 @@ def make_vectors(sim, offset, rng, u_noise=1e-4, t_mean=(-1e6, 2e5, -1e5), t_noi
 
 
 def taylor(sim, x, v):
-    p = sim.model.equations
+    p, hist = sim.model.equations, sim.state.histories
     F0, Fh, Jv, xh = x.duplicate(), x.duplicate(), x.duplicate(), x.duplicate()
-    p.residual(None, x, F0)
-    p.assemble_jacobian(x, p.J)
+    p.residual(x, F0, hist)
+    p.assemble_jacobian(x, p.J, hist)
     p.J.mult(v, Jv)
-    states0 = p.faults.states(p.local_array(x), exact=True)
+    states0 = p.configuration(x, hist)[0]
     e1, e2, same = [], [], True
     for h in H:
         x.copy(xh)
         xh.axpy(h, v)
-        p.residual(None, xh, Fh)
+        p.residual(xh, Fh, hist)
         Fh.axpy(-1.0, F0)
         e1.append(Fh.norm())
         Fh.axpy(-h, Jv)
         e2.append(Fh.norm())
-        same &= bool(np.array_equal(p.faults.states(p.local_array(xh), exact=True), states0))
+        same &= bool(np.array_equal(p.configuration(xh, hist)[0], states0))
     same = bool(COMM.tompi4py().allreduce(same, op=MPI.LAND))
     counts = np.bincount(states0, minlength=3) if len(states0) else np.zeros(3, np.int64)
     counts = COMM.tompi4py().allreduce(counts)
@@ -102,11 +103,14 @@ def taylor(sim, x, v):
     return out
 
 
-def set_history(f, rng, g_prev, t_prev):
-    """Start-of-step jump and traction (local frame) of the owned faces."""
+def set_history(sim, rng, g_prev, t_prev):
+    """Start-of-step jump (local frame) of the owned faces (``t_prev``: the start's tractions, which the laws do not
+    read, drawn to keep the random sequence)."""
+    f = sim.model.equations.terms[0]
     g = np.asarray(g_prev)[None, :] + 1e-4 * rng.normal(size=(f.faces.nf, 3))
-    t = np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.faces.nf, 3))
-    f.start = StepStart(g, t, np.zeros(f.faces.nf, np.int64))
+    np.asarray(t_prev)[None, :] + 1e4 * rng.normal(size=(f.faces.nf, 3))
+    h = sim.state.histories[0]
+    sim.state.histories = (replace(h, start=StepStart(g, np.zeros(f.faces.nf, np.int64))),)
 
 
 # multipliers (local frame = global here: n = +x) and plus-side jumps that put a face in each branch: stuck
@@ -118,7 +122,7 @@ G_PREV = (0.0, 1e-3, 2e-3)
 
 def lagrange_cases(results, prefix=""):
     sim = Simulation(SCENE, sys.argv)
-    p, f = sim.model.equations, sim.model.faults
+    p, f = sim.model.equations, sim.model.equations.terms[0]
     p.loads.set(1.0)
     rng = np.random.default_rng(1234 + COMM.rank)
     counts = COMM.tompi4py().allgather(f.faces.nf)
@@ -129,7 +133,7 @@ def lagrange_cases(results, prefix=""):
     for name, t_mean, offset in (("stick", T_STICK, (0.0, 1e-3, 2e-3)), ("slip", T_SLIP, (0.0, 2e-2, -2e-2)),
                                  ("open", T_OPEN, (2e-1, 0.0, 0.0)), ("slip_start", T_SLIP, (0.0, 1e-3, 2e-3)),
                                  ("mixed", mixed_t, None)):
-        set_history(f, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
+        set_history(sim, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
         x, v = make_vectors(sim, offset=(0.0, 1e-3, 2e-3) if offset is None else offset, rng=rng, t_mean=t_mean,
                             t_noise=2e4)
         results[prefix + "lagrange_" + name] = taylor(sim, x, v)
@@ -144,13 +148,13 @@ def breaking_cases(results):
     for key, value in (("tensile_strength", 5e4), ("residual_cohesion", 3e4)):
         opts.setValue(f"pfault_fault_fault_{key}", value)
     sim = Simulation(SCENE, sys.argv)
-    f = sim.model.faults
+    f = sim.model.equations.terms[0]
     sim.model.equations.loads.set(1.0)
     rng = np.random.default_rng(2468 + COMM.rank)
     mixed_t = np.array([T_STICK, T_SLIP, (5e6, 1e5, 0.0)])[f.faces.face % 3]
     for name, broken in (("intact_mixed", np.zeros(f.faces.nf, bool)), ("broken_mixed", f.faces.face % 2 == 0)):
-        sim.state.break_faces(broken, 0.0)
-        set_history(f, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
+        sim.state.histories = (sim.state.histories[0].with_breaks(broken, 0.0),)
+        set_history(sim, rng, g_prev=G_PREV, t_prev=(-9e5, 1e4, 5e4))
         x, v = make_vectors(sim, offset=(0.0, 1e-3, 2e-3), rng=rng, t_mean=mixed_t, t_noise=2e4)
         results[name] = taylor(sim, x, v)
         x.destroy()
@@ -164,17 +168,17 @@ def penalty_cases(results, prefix=""):
     opts = PETSc.Options()
     opts.setValue("pfault_fault_fault_method", "penalty")
     sim = Simulation(SCENE, sys.argv)
-    p, f = sim.model.equations, sim.model.faults
+    p, f = sim.model.equations, sim.model.equations.terms[0]
     p.loads.set(1.0)
     rng = np.random.default_rng(4321 + COMM.rank)
-    k = float(np.mean(f.penalty_law.c_n)) if f.faces.nf else 0.0
+    k = float(np.mean(f.laws.penalty.c_n)) if f.faces.nf else 0.0
     results["penalty_stiffness"] = COMM.tompi4py().allgather(k)
     # t_N = k g_N, tau_L = tan(phi) |t_N|; trial shear = t_T^n + k (g_T - g_T^n)
     for name, offset, g_prev, t_prev in (
             ("stick", (-2e-2, 0.0, 1e-3), (0.0, 0.0, 0.0), (-5e5, 0.0, 1e4)),
             ("slip", (-1e-2, 0.0, 8e-2), (0.0, 1e-3, 2e-3), (-5e5, 1e4, 5e4)),
             ("open", (1e-2, 0.0, 3e-2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))):
-        set_history(f, rng, g_prev, t_prev)
+        set_history(sim, rng, g_prev, t_prev)
         # (a penalty face's multipliers are its traction; small ones keep the bubbles' part of the jump small, so
         # that the jump alone selects the branch)
         x, v = make_vectors(sim, offset=offset, rng=rng, t_mean=(0.0, 0.0, 0.0), t_noise=1e3)

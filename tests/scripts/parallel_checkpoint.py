@@ -39,7 +39,7 @@ class Gathered(Observer):
         self.steps_written = []
 
     def step_done(self, result):
-        if not result.record["converged"]:
+        if not result.record.converged:
             return
         out, sim = self.output, self.sim
         gathered = checkpoint.Writer(sim.comm, sim.model.mesh, out.checkpoint.faces, out.checkpoint.n_faces,

@@ -23,12 +23,12 @@ import numpy as np  # noqa: E402
 
 from pfault.errors import run_on_root  # noqa: E402
 from pfault.io.observers import Observer  # noqa: E402
+from pfault.io.steps import StepOutput  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 
 class Mirror(Observer):
-    """Every output step written again by a gathering StepOutput into gathered_dir, after the run's own: the
-    land surface's hazard maxima must be the same."""
+    """Every output step written again by a gathering StepOutput into gathered_dir, after the run's own."""
 
     def __init__(self, output):
         self.output = output
@@ -39,16 +39,15 @@ class Mirror(Observer):
             return
         out = self.output
         if self.fields is None:         # (the writer is rank 0's: None on the other ranks)
+            m = out.model
             self.writer = run_on_root(out.comm, out.create_writer, gathered_dir)
-            self.fields = out.step_output(self.writer, parallel=False)
-            self.write(0, 0.0, np.zeros(len(result.u_rel)), initial=True)
-        again = self.write(result.step, result.t, result.u_rel)
-        assert again == (result.derived or None), (again, result.derived)
-
-    def write(self, step, t, u_rel, initial=False):
-        maxima = self.fields.write(step, t, self.output.step_values(t, u_rel, initial))
-        run_on_root(self.output.comm, lambda: self.writer.commit())      # the writer: rank 0 only
-        return maxima
+            sides = out.comm.tompi4py().bcast(m.split.vert_sides if out.comm.rank == 0 and m.split is not None
+                                              else None)
+            self.fields = StepOutput(out.comm, m.mesh, self.writer, sides, m.dofmap.max_sides, faces=m.faces.face,
+                                     fault_id=m.fault_id, parallel=False)
+            self.fields.write(0, 0.0, *out.initial)
+        out.write_step(result, self.fields)
+        run_on_root(out.comm, lambda: self.writer.commit())      # the writer: rank 0 only
 
 
 class Twice(Simulation):
@@ -71,7 +70,7 @@ if out.parallel:
     # per series and kind of row, every rank's (block it writes, rows it holds outside that block)
     from pfault.io.parallel import Block
     rows = {"fields": {"Node": out.vertices, "Cell": out.cells}}
-    if out.faces is not None:
+    if out.n_faces:
         rows["fault"] = {"Cell": out.face_rows}
     for name, by_center in rows.items():
         blocks[name] = {}

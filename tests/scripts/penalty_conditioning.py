@@ -35,7 +35,7 @@ from petsc4py import PETSc  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 
-def solve(p, f, x, F, pc):
+def solve(sim, p, f, x, F, pc):
     ksp = PETSc.KSP().create(comm=PETSc.COMM_WORLD)
     ksp.setOptionsPrefix("cond_")
     ksp.setOperators(p.J, p.J)
@@ -50,7 +50,7 @@ def solve(p, f, x, F, pc):
     smax, smin = ksp.computeExtremeSingularValues()
     # the solution's largest fault jump (stick: the exact answer is zero; penalty: ~ |t| / k)
     dx.axpy(1.0, x)
-    gl = f.law_jumps(p.local_array(dx))[1]
+    gl = f.law_jumps(p.local_array(dx), p.loads.term_loads[0], sim.state.histories[0])[0]
     jump = float(np.max(np.linalg.norm(gl, axis=1), initial=0.0))
     jump = f.faces.mpi.allreduce(jump, op=MPI.MAX)
     ksp.destroy()
@@ -66,7 +66,7 @@ def one(method, k=None):
         opts.setValue("pfault_fault_fault_penalty_normal", repr(k))
         opts.setValue("pfault_fault_fault_penalty_tangential", repr(k))
     sim = Simulation(SCENE, sys.argv)
-    p, f, dm = sim.model.equations, sim.model.faults, sim.model.dofmap
+    p, f, dm = sim.model.equations, sim.model.equations.terms[0], sim.model.dofmap
     p.loads.set(1.0)
     x = sim.state.u.duplicate()
     loc = np.zeros(dm.n_local)
@@ -74,12 +74,12 @@ def one(method, k=None):
     loc[dm.vertex_dofs(1)[dm.vert_sides > 1]] = (-1e-9, 0.0, 0.0)
     p.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=x)
     F = x.duplicate()
-    p.residual(None, x, F)
+    p.residual(x, F, sim.state.histories)
     F.scale(-1.0)
-    p.assemble_jacobian(x, p.J)
+    p.assemble_jacobian(x, p.J, sim.state.histories)
     out = {}
     for pc in pcs:
-        out[pc] = solve(p, f, x, F, pc)
+        out[pc] = solve(sim, p, f, x, F, pc)
         out[pc].update(method=method, k=k)
     for obj in (x, F):
         obj.destroy()

@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 from petsc4py import PETSc
 
+from pfault.records import Solve, SolveCost
 from pfault.solver.policy import cut_step
 from pfault.sources import FlowSource
+from pfault.state import State
 
 
 class FakeFlow:
@@ -36,7 +38,8 @@ class FakeStep:
     (t, dp the source gives at t, u at the start, converged)."""
 
     def __init__(self, source, max_increment, t_done=0.0):
-        self.u = PETSc.Vec().createSeq(3)
+        self.state = State(PETSc.Vec().createSeq(3))
+        self.u = self.state.u
         self.u.set(1.0)
         self.source, self.max_increment, self.t_done = source, max_increment, t_done
         self.calls = []
@@ -49,8 +52,7 @@ class FakeStep:
         self.u.set(100.0 + t)                 # a solve changes the state, converged or not
         if ok:
             self.t_done = t
-        return {"time_s": t, "newton_its": 2, "ksp_its": 2, "wall_s": 0.1, "factorizations": 2,
-                "converged": ok, "residual_history": [1.0, 0.0]}
+        return Solve(t, ok, 2 if ok else -5, SolveCost(2, 2, 0.1, 2, 0, (1.0, 0.0)), nonlinear=True)
 
 
 def test_failed_step_is_retried_as_sub_steps_with_interpolated_pressure():
@@ -60,8 +62,8 @@ def test_failed_step_is_retried_as_sub_steps_with_interpolated_pressure():
     step = FakeStep(source, max_increment=0.25, t_done=1.0)
     step.u.set(1.0)
     source.advance_to(2.0)                  # the time loop advances the source before the step
-    rec = cut_step(step, step.u, 1.0, 2.0, max_cuts=3)
-    assert rec["converged"] and rec["substeps"] == 4
+    rec = cut_step(step, step.state, 1.0, 2.0, max_cuts=3)
+    assert rec.converged and rec.substeps == 4
     times = [c[0] for c in step.calls]
     # full step, then 2 sub-steps (the first fails), then 4 sub-steps
     assert times == pytest.approx([2.0, 1.5, 1.25, 1.5, 1.75, 2.0])
@@ -70,8 +72,9 @@ def test_failed_step_is_retried_as_sub_steps_with_interpolated_pressure():
     # pore pressure: linear in time between the step's ends; the flow was advanced once, to t = 2
     assert [c[1] for c in step.calls] == pytest.approx([-20.0, -15.0, -12.5, -15.0, -17.5, -20.0])
     assert flow.advances == [1.0, 2.0]
-    assert rec["newton_its"] == 12 and rec["factorizations"] == 12 and rec["time_s"] == 2.0
-    assert len(rec["residual_history"]) == 12
+    assert rec.cost.newton_its == 12 and rec.cost.factorizations == 12 and rec.time_s == 2.0
+    assert len(rec.cost.residual_history) == 12
+    assert rec.as_json()["substeps"] == 4 and rec.as_json()["newton_its"] == 12
 
 
 def test_flow_source_reading_has_no_side_effect():
@@ -91,10 +94,10 @@ def test_no_retry_without_cuts_and_failure_after_the_last_cut():
     source = FlowSource(FakeFlow())
     source.advance_to(1.0)
     step = FakeStep(source, max_increment=0.1)
-    rec = cut_step(step, step.u, 0.0, 1.0, max_cuts=0)
-    assert not rec["converged"] and len(step.calls) == 1
+    rec = cut_step(step, step.state, 0.0, 1.0, max_cuts=0)
+    assert not rec.converged and len(step.calls) == 1
     step = FakeStep(source, max_increment=0.1)
-    rec = cut_step(step, step.u, 0.0, 1.0, max_cuts=2)
-    assert not rec["converged"] and rec["substeps"] == 4
+    rec = cut_step(step, step.state, 0.0, 1.0, max_cuts=2)
+    assert not rec.converged and rec.substeps == 4
     assert step.u.getArray()[0] != 1.0
     assert step.calls[-1][3] is False

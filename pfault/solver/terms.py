@@ -1,0 +1,95 @@
+"""The terms the equations are given besides the elastic skeleton, and the protocol they follow.
+
+The equations (pfault.solver.equations) are the elastic skeleton K u = f(t) plus a list of terms: each fault
+interface today (pfault.faults.term.FaultTerm), a material with memory next. A scene without faults has an empty
+list: the equations are then linear and nothing else asks what they hold. A term is configuration only: what it
+remembers is a history (plain frozen data in the run's state, pfault.state.State), and what it sees at the time
+the equations were last set to is its load (Loads.term_loads); every method takes them and returns values or the
+next history, in the local numbering of the distributed mesh's dofs.
+
+The protocol (methods a term has; collective where it says so):
+
+- ``name``: what it is ("faults").
+- Building: ``add_operator(K, blocked)`` adds its constant part to the operator (before assembly);
+  ``pattern()`` the global (rows, cols) of its further Jacobian entries.
+- Loads: ``load(t, cell_dp, alpha, out)`` its load at time t (the pore-pressure change per local cell, or None),
+  adding its share of f to the local array ``out``; ``gravity_load(body, previous, out)`` that of the initial
+  gravity state; ``at_rest(load)`` the load of the initial state itself, which loads nothing.
+- Histories: ``initial_history()``; ``prestressed(sigma0, x_loc, load, history)`` the history from an initial
+  stress (the multipliers it sets in x_loc); ``begin_step(x_loc, load, history)`` at the start of a solve;
+  ``commit(x_loc, load, history)`` after a converged step; ``settle(x_loc, load, history, t)`` the history after a
+  converged solve and how many of its parts changed on all ranks (faces that broke: the solve is repeated at the
+  same load until none does).
+- The discrete configuration (its active set: a fault face's stick/slip/open): ``configuration(x_loc, load,
+  history, exact)`` (exact: the branches the residual takes; else as reported), ``trial_configuration(history)``
+  (a step's elastic trial), ``jacobian_varies(configuration)`` (collective: whether the Jacobian depends on more
+  than the configuration).
+- Equations: ``residual(x_loc, load, history, out, configuration=None)`` adds its residual to ``out``;
+  ``add_jacobian(x_loc, load, history, J, configuration=None)`` its blocks to J;
+  ``add_initial_operator(A, n_local)`` its blocks of the initial gravity state's linear operator, returning their
+  configuration.
+- Stress: ``cell_strain(x_loc, load, history)`` (cells, strain) it adds to the cells' mean strain.
+- What is reported: ``measures(x_loc, x_rel, load, history, mesh)`` the step record's figures (JSON-ready,
+  collective); ``fields(x_total, x_rel, load, history)`` the output series' fields ({"fault": per owned face,
+  "cells": per local cell}).
+- The checkpoint: ``rows`` (what its history's arrays are per: "face" or "cell"), ``history_arrays(history)``
+  ({name: array per row}) and ``restored(arrays, x_loc, load)`` the history they hold, started at x_loc.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+
+class Term(Protocol):
+    """A term of the equations (see the module docstring)."""
+
+    name: str
+
+    def add_operator(self, K: Any, blocked: bool) -> None: ...
+
+    def pattern(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def load(self, t: float, cell_dp: np.ndarray | None, alpha: np.ndarray, out: np.ndarray) -> Any: ...
+
+    def gravity_load(self, body: np.ndarray, previous: Any, out: np.ndarray) -> Any: ...
+
+    def at_rest(self, load: Any) -> Any: ...
+
+    def initial_history(self) -> Any: ...
+
+    def prestressed(self, sigma0: np.ndarray, x_loc: np.ndarray, load: Any, history: Any) -> Any: ...
+
+    def begin_step(self, x_loc: np.ndarray, load: Any, history: Any) -> Any: ...
+
+    def commit(self, x_loc: np.ndarray, load: Any, history: Any) -> Any: ...
+
+    def settle(self, x_loc: np.ndarray, load: Any, history: Any, t: float) -> tuple[Any, int]: ...
+
+    def configuration(self, x_loc: np.ndarray, load: Any, history: Any, exact: bool = True) -> np.ndarray: ...
+
+    def trial_configuration(self, history: Any) -> np.ndarray: ...
+
+    def jacobian_varies(self, configuration: np.ndarray) -> bool: ...
+
+    def residual(self, x_loc: np.ndarray, load: Any, history: Any, out: np.ndarray,
+                 configuration: np.ndarray | None = None) -> None: ...
+
+    def add_jacobian(self, x_loc: np.ndarray, load: Any, history: Any, J: Any,
+                     configuration: np.ndarray | None = None) -> None: ...
+
+    def add_initial_operator(self, A: Any, n_local: int) -> np.ndarray: ...
+
+    def cell_strain(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def measures(self, x_loc: np.ndarray, x_rel: np.ndarray, load: Any, history: Any, mesh: Any) -> dict: ...
+
+    def fields(self, x_total: np.ndarray, x_rel: np.ndarray, load: Any, history: Any) -> dict: ...
+
+    rows: str
+
+    def history_arrays(self, history: Any) -> dict: ...
+
+    def restored(self, arrays: dict, x_loc: np.ndarray, load: Any) -> Any: ...
