@@ -217,8 +217,7 @@ def _apply_solver(scene: Scene, mesh: Any, options_file: str) -> str | None:
     # the unknowns this rank owns: the global section's (DMPlex caches it; the state's Vec is laid out from it)
     owned = mesh.dm.getGlobalSection().getConstrainedStorageSize()
     n_dofs = int(mesh.dm.getComm().tompi4py().allreduce(owned))
-    name = solver_file_name(scene.solver_name or "", n_dofs, scene.fault_settings,
-                            pc_type_given=PETSc.Options().hasName("pc_type"))
+    name = solver_file_name(scene.solver_name or "", n_dofs, pc_type_given=PETSc.Options().hasName("pc_type"))
     if scene.solver_name == AUTO and name:
         PETSc.Sys.Print(f"pfault: -pfault_solver auto: {name} ({n_dofs:,} unknowns; the iterative solver from "
                         f"{ITERATIVE_FROM_DOFS:,})")

@@ -157,6 +157,7 @@ def time_loop(stepper: Stepper, observers: list, times: np.ndarray, first: int, 
                 obs.step_started(step, t)
             solve_stage.push()
             model.source.advance_to(t)
+            stepper.state.source_state = model.source.state()
             solve = stepper.solve(float(times[index - 1]), t)
             source = model.source.step_record()
             solve_stage.pop()

@@ -68,7 +68,7 @@ class Simulation:
         t0 = time.perf_counter()
         stage = PETSc.Log.Stage("Setup")
         stage.push()
-        state = State(m.equations.create_vec(), m.equations.initial_histories())
+        state = State(m.equations.create_vec(), m.equations.initial_histories(), m.source.state())
         contact = m.scene.contact
         try:
             solver = StepSolver(m.equations, state, geostatic=m.settings.geostatic,

@@ -58,10 +58,6 @@ class ElasticAssembler:
         b[:, 2] = -self.density * g
         self.scatter_cell_forces(el.body_force(self.vol, b), out)
 
-    def initial_stress_load(self, sigma0: np.ndarray, out: np.ndarray) -> None:
-        """Right-hand side of a prestress: -int B^T sigma0."""
-        self.scatter_cell_forces(-el.stress_divergence_force(self.grad, self.vol, sigma0), out)
-
     def traction_load(self, tractions: Sequence[Sequence[float]], out: np.ndarray) -> None:
         """Constant tractions on tagged boundary faces; tractions[tag] = (tx, ty, tz)."""
         tag = self.mesh.cell_face_tag

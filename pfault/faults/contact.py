@@ -137,49 +137,12 @@ def lagrange_rows(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t: np.ndarray
     return st, r * A[:, None], dg * A[:, None, None], dt * A[:, None, None]
 
 
-def penalty_traction(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t_prev: np.ndarray,
-                     t0_n: np.ndarray | None = None,
-                     branch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Penalty contact: traction (nf,3), derivative dt/dg (nf,3,3) and state.
-
-    t_N = t0_N + c_N g_N while in contact (t_N <= T, the tensile strength), T when open; tangential return
-    map from t_T^n + c_T dg_T onto the Mohr-Coulomb cone (no shear when open). t0_N is the initial (effective)
-    normal traction, 0 by default. ``branch``: the branches to take instead of the return map's (stick or open
-    only: the linear elastic trial of a step).
-    """
-    nf = len(g)
-    kn, kt = law.c_n, law.c_t
-    t = np.zeros((nf, 3))
-    d = np.zeros((nf, 3, 3))
-    state = np.full(nf, OPEN)
-    t0n = np.zeros(nf) if t0_n is None else t0_n
-    tn_trial = t0n + kn * g[:, 0]
-    strength = tensile_strength(law.cohesion, law.tan_phi)
-    closed = tn_trial <= strength if branch is None else np.asarray(branch) != OPEN
-    t[closed, 0] = tn_trial[closed]
-    t[~closed, 0] = strength[~closed]
-    d[closed, 0, 0] = kn[closed]
-    trial = t_prev[:, 1:] + kt[:, None] * (g[:, 1:] - g_prev[:, 1:])
-    tau = coulomb_limit(t[:, 0], law.cohesion, law.tan_phi)
-    dtau_dtn = np.where(law.cohesion - law.tan_phi * t[:, 0] > 0, -law.tan_phi, 0.0)
-    tn = np.linalg.norm(trial, axis=1)
-    stick = closed & (tn <= tau) if branch is None else closed
-    slip = closed & ~stick
-    t[stick, 1:] = trial[stick]
-    d[stick, 1, 1] = d[stick, 2, 2] = kt[stick]
-    state[stick] = STICK
-    if np.any(slip):
-        s = trial[slip] / tn[slip, None]
-        t[slip, 1:] = tau[slip, None] * s
-        proj = np.eye(2)[None] - np.einsum("ni,nj->nij", s, s)
-        d[slip, 1:, 1:] = (tau[slip] * kt[slip] / tn[slip])[:, None, None] * proj
-        d[slip, 1:, 0] = (dtau_dtn[slip] * kn[slip])[:, None] * s
-        state[slip] = SLIP
-    return t, d, state
-
-
-def transition_counts(old: np.ndarray, new: np.ndarray) -> np.ndarray:
-    """3x3 table: counts[i, j] faces going from state i to state j."""
-    c = np.zeros((3, 3), dtype=np.int64)
-    np.add.at(c, (old, new), 1)
-    return c
+def penalty_jump(law: FaceLaw, g: np.ndarray, t: np.ndarray, t0_n: np.ndarray) -> np.ndarray:
+    """The jump a penalty face's Lagrange rows act on: its jump less the penalty's compliance,
+    g - (t_N - t0_N, t_T) / (k_N, k_T) (``law``: the penalty stiffnesses; t the effective traction and t0_n the
+    initial effective normal traction). The rows ``lagrange_rows`` on it (a perturbed Lagrangian) hold
+    t_N = t0_N + k_N g_N while closed and t_T = t_T^n + k_T dg_T while stuck, and slip along the return map's trial
+    t_T^n + k_T dg_T: the penalty law; d(jump)/dt = -1/k."""
+    te = np.array(t, dtype=float, copy=True)
+    te[:, 0] -= t0_n
+    return g - te / np.stack([law.c_n, law.c_t, law.c_t], axis=1)

@@ -82,10 +82,6 @@ class FaultFaces:
         self.young = young[self.cell]
         self.lm_dofs = self._multiplier_dofs(mesh, dofmap)
         self.dofs = self._dofs(mesh.cells, dofmap, bc_local, lgmap)
-        ids = np.concatenate(self.mpi.allgather(self.face)) if self.nf_total else np.zeros(0, np.int64)
-        self.all_ids = ids.astype(np.int64)          # serial ids of all ranks' faces, in allgather order
-        self.pos = np.full(self.nf_total, -1)       # owned index of each serial face (-1: another rank's)
-        self.pos[self.face] = np.arange(nf)
 
     @property
     def h(self) -> np.ndarray:
@@ -114,17 +110,6 @@ class FaultFaces:
         g_lm = lgmap.apply(self.lm_dofs.ravel().astype(idx)).reshape(nf, 3) if nf else np.zeros((0, 3), idx)
         free = ~bc_local[u] if nf else np.zeros((0, 18), bool)
         return FaceDofs(u, g_u, free, np.concatenate([-np.ones(9), np.ones(9)]), g_lm)
-
-    # -- data exchange ------------------------------------------------------------------------
-    def gather_faces(self, values: np.ndarray) -> np.ndarray:
-        """Per-owned-face arrays (nf, k) -> (nf_total, k) in serial face order on every rank."""
-        values = np.ascontiguousarray(values, dtype=np.float64)
-        k = values.shape[1] if values.ndim > 1 else 1
-        parts = self.mpi.allgather(values.reshape(self.nf, k))
-        out = np.zeros((self.nf_total, k))
-        if self.nf_total:
-            out[self.all_ids] = np.concatenate(parts)
-        return out
 
     # -- kinematics ----------------------------------------------------------------------------
     def jumps(self, u_loc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -188,17 +188,13 @@ class FaultTerm:
     def law_jumps(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory
                   ) -> tuple[np.ndarray, np.ndarray]:
         """The jumps the laws take (local frame) and the total tractions. A penalty face's is its jump less the
-        penalty's compliance, g - (t_eff - t0_eff) / k with t0_eff the initial normal traction (tangential: t_T / k,
-        measured from the step's start like g_T): its Lagrange rows then hold t_N = t0_N + k g_N while closed and
-        t_T = t_T^n + k dg_T while stuck, and slip along the return map's trial t_T^n + k dg_T, the penalty law."""
+        penalty's compliance (pfault.faults.contact.penalty_jump), which makes its Lagrange rows the penalty law."""
         t = self.tractions(x_loc)
         _, gl = self.mean_jumps(x_loc, t - history.t0, load)
         pen = ~self.faces.lagrange
         if np.any(pen):
-            law = self.laws.penalty[pen]
-            te = load.effective(t[pen])
-            te[:, 0] -= history.t0[pen, 0] + load.pn[pen]
-            gl[pen] -= te / np.stack([law.c_n, law.c_t, law.c_t], axis=1)
+            gl[pen] = ct.penalty_jump(self.laws.penalty[pen], gl[pen], load.effective(t[pen]),
+                                      history.t0[pen, 0] + load.pn[pen])
         return gl, t
 
     def configuration(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory, exact: bool = True

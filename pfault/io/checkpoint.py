@@ -65,6 +65,7 @@ from petsc4py import PETSc
 from ..errors import InputError, PfaultError, run_on_all, run_on_root
 from ..fields import LAGRANGE
 from ..mesh import distributed
+from ..sources import FlowState
 from . import parallel, run_options
 from .output import TMP_SUFFIX, open_h5
 
@@ -125,11 +126,11 @@ def local_state(model: Model, state: State, step: int, t: float, records: list[d
             data[f"{term.name}/{key}"] = (term.rows, values)
     # datasets, not attributes: a long run's records outgrow HDF5's 64 KiB attribute limit
     texts = {"steps": json.dumps(records).encode()}
-    if source.has_state:
-        head, flow_time, history = source.checkpoint()
-        data["flow/head"] = (VERTEX, np.asarray(head, dtype=float))
-        texts["flow/history"] = json.dumps(history).encode()
-        attrs["flow_time"] = float(flow_time)
+    if state.source_state is not None:
+        flow = state.source_state
+        data["flow/head"] = (VERTEX, np.asarray(flow.head, dtype=float))
+        texts["flow/history"] = json.dumps(list(flow.history)).encode()
+        attrs["flow_time"] = float(flow.time)
     return data, attrs, texts
 
 
@@ -332,8 +333,9 @@ def restore(ckpt: dict[str, np.ndarray], attrs: dict[str, Any], model: Model, st
     if "sigma0" in ckpt:
         state.sigma0 = ckpt["sigma0"][mesh.cell_serial].reshape(-1, 3, 3)
     if model.source.has_state:
-        model.source.restore(ckpt["flow/head"][mesh.vert_serial], attrs["flow_time"],
-                             json.loads(bytes(ckpt["flow/history"]).decode()))
+        state.source_state = FlowState(ckpt["flow/head"][mesh.vert_serial], float(attrs["flow_time"]),
+                                       tuple(json.loads(bytes(ckpt["flow/history"]).decode())))
+        model.source.restore(state.source_state)
     eq.loads.set(state.time)        # the terms' loads of the checkpoint's time: their start reads them
     x_loc = eq.local_array(state.u)
     rows = {FACE: model.faces.face, CELL: mesh.cell_serial}

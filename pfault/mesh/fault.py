@@ -44,10 +44,6 @@ class FaultSplit:
     tip_vertices: np.ndarray  # sorted ids of fault vertices that are not split
 
     @property
-    def split_vertices(self) -> np.ndarray:
-        return np.nonzero(self.vert_sides > 1)[0]
-
-    @property
     def copies(self) -> tuple[np.ndarray, np.ndarray]:
         """The extra copies of split vertices on the output mesh: (vertex, piece) of each, see vertex_copies."""
         return vertex_copies(self.vert_sides)

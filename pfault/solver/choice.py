@@ -1,15 +1,12 @@
 """Which solver file a run applies when the scene leaves -pfault_solver at auto: the direct solver (MUMPS,
 pfault/solver/options/mumps.opts) on small systems, the iterative one (options/iterative.opts) from the size
-where it is the faster, unless the scene's faults need the direct solver. Pure functions of what the scene
-asks for and how many unknowns its mesh gives."""
+where it is the faster. Pure functions of what the scene asks for and how many unknowns its mesh gives.
+
+No fault rules out the iterative solver: every Lagrange face has a negative definite 3x3 block from its condensed
+bubbles for the Schur fieldsplit to eliminate its multipliers with (pfault.solver.fieldsplit.FieldSplit), and a
+penalty face's multipliers are eliminated the same way."""
 
 from __future__ import annotations
-
-from collections.abc import Iterable
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from ..faults.settings import FaultSettings
 
 AUTO = "auto"
 DIRECT = "mumps"
@@ -28,21 +25,12 @@ ITERATIVE = "iterative"
 ITERATIVE_FROM_DOFS = 50_000
 
 
-def faults_need_direct(fault_settings: Iterable[FaultSettings]) -> bool:
-    """Whether a scene's faults rule out the iterative solver: none do. Every Lagrange face has a negative
-    definite 3x3 block from its condensed bubbles for the Schur fieldsplit to eliminate its multipliers with
-    (pfault.solver.fieldsplit.FieldSplit). Penalty faults add no unknowns: with penalty faults only,
-    the iterative solver is the displacement split's AMG on the stiffness and the penalty springs."""
-    return False
+def choose_solver(n_dofs: int) -> str:
+    """DIRECT below ITERATIVE_FROM_DOFS global unknowns, ITERATIVE from there."""
+    return DIRECT if n_dofs < ITERATIVE_FROM_DOFS else ITERATIVE
 
 
-def choose_solver(n_dofs: int, need_direct: bool = False) -> str:
-    """DIRECT below ITERATIVE_FROM_DOFS global unknowns or where the faults need it, ITERATIVE from there."""
-    return DIRECT if need_direct or n_dofs < ITERATIVE_FROM_DOFS else ITERATIVE
-
-
-def solver_file_name(requested: str, n_dofs: int, fault_settings: Iterable[FaultSettings],
-                     pc_type_given: bool = False) -> str:
+def solver_file_name(requested: str, n_dofs: int, pc_type_given: bool = False) -> str:
     """The -pfault_solver value a run applies (a name for pfault.solver.setup.apply_solver_file): the one the
     user or the scene named, as it is; for ``auto`` the choice of ``choose_solver``, or none ("") when the user
     chose the preconditioner with -pc_type and named no solver file (PETSc's options then steer the solver
@@ -51,4 +39,4 @@ def solver_file_name(requested: str, n_dofs: int, fault_settings: Iterable[Fault
         return requested
     if pc_type_given:
         return ""
-    return choose_solver(n_dofs, faults_need_direct(fault_settings))
+    return choose_solver(n_dofs)

@@ -9,18 +9,28 @@ equations and the output read it with ``cell_dp(t)``, which changes nothing. Eve
   last advanced from and the time it was advanced to (a step cut into sub-steps reads it within the step:
   a flow model's field is interpolated linearly in time there);
 - ``step_record()``: figures of the last advance for the step's record (empty for a table);
-- ``has_state``; ``checkpoint()`` / ``restore(...)``: its state, for a restart (a flow model's; a table has none);
+- ``has_state``; ``state()`` / ``restore(state)``: its state (a flow model's ``FlowState``; a table has none: None),
+  which the run's state records after every advance and a restart gives back;
 - ``destroy()``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from mpi4py import MPI
 
 from ..solver.flow import after
+
+
+@dataclass(frozen=True)
+class FlowState:
+    """A flow model's state: its head change per local vertex (m), its time (s) and its step records."""
+    head: np.ndarray
+    time: float
+    history: tuple
 
 
 class TableSource:
@@ -48,6 +58,12 @@ class TableSource:
     def vertex_head(self) -> None:
         """No head field: the tables give the pressure change directly."""
         return None
+
+    def state(self) -> None:
+        return None
+
+    def restore(self, state: None) -> None:
+        """Nothing to restore."""
 
     def destroy(self) -> None:
         pass
@@ -103,12 +119,12 @@ class FlowSource:
     def vertex_head(self) -> np.ndarray:
         return self.flow.vertex_head()
 
-    def checkpoint(self) -> tuple[np.ndarray, float, list]:
-        """(head per local vertex (m), the flow's time (s), its step records)."""
-        return self.flow.vertex_head(), float(self.flow.time), list(self.flow.history)
+    def state(self) -> FlowState:
+        """Its head per local vertex (m), time (s) and step records."""
+        return FlowState(self.flow.vertex_head(), float(self.flow.time), tuple(self.flow.history))
 
-    def restore(self, head: np.ndarray, time: float, history: list) -> None:
-        self.flow.restore(head, time, history)
+    def restore(self, state: FlowState) -> None:
+        self.flow.restore(state.head, state.time, list(state.history))
         self._before = None
 
     def destroy(self) -> None:

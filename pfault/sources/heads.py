@@ -171,6 +171,12 @@ class HeadsSource:
     def vertex_head(self) -> None:
         return None
 
+    def state(self) -> None:
+        return None
+
+    def restore(self, state: None) -> None:
+        """A function of time: nothing to restore."""
+
     def destroy(self) -> None:
         pass
 

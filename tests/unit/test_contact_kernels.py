@@ -1,7 +1,9 @@
 """Contact/friction kernels (pfault.faults.contact): the semismooth residual's generalised derivative against
 finite differences in every state away from the kinks, its zeros (the contact conditions), its continuity
 across the stick/slip and closed/open switches with and without cohesion (the tension cut-off at the cone's
-apex), and its independence of the augmentation; the penalty law."""
+apex), and its independence of the augmentation; the penalty law as the solver runs it (the Lagrange rows on the
+penalty's compliant jump, ``penalty_jump``) against the penalty return map written out here.
+"""
 
 import numpy as np
 import pytest
@@ -21,6 +23,26 @@ def fd_check(fun, x, analytic, h=1e-7):
         num[:, :, k] = (fun(xp) - fun(xm)) / (2 * h)
     scale = max(1.0, np.abs(analytic).max())
     return np.abs(num - analytic).max() / scale
+
+
+def penalty_traction(law, g, g_prev, t_prev, t0_n):
+    """The penalty law, written out as a return map (the reference): t_N = t0_N + k_N g_N while t_N <= T (the
+    tensile strength c / tan(phi)), T when open; the shear's trial t_T^n + k_T (g_T - g_T^n) returned onto the
+    Mohr-Coulomb cone (no shear when open). Returns the traction and the state."""
+    kn, kt = law.c_n, law.c_t
+    strength = ct.tensile_strength(law.cohesion, law.tan_phi)
+    tn = t0_n + kn * g[:, 0]
+    closed = tn <= strength
+    t = np.zeros_like(g)
+    t[:, 0] = np.where(closed, tn, strength)
+    trial = t_prev[:, 1:] + kt[:, None] * (g[:, 1:] - g_prev[:, 1:])
+    tau = ct.coulomb_limit(t[:, 0], law.cohesion, law.tan_phi)
+    size = np.linalg.norm(trial, axis=1)
+    stick = closed & (size <= tau)
+    slip = closed & ~stick
+    t[stick, 1:] = trial[stick]
+    t[slip, 1:] = tau[slip, None] * trial[slip] / size[slip, None]
+    return t, np.where(stick, ct.STICK, np.where(slip, ct.SLIP, ct.OPEN))
 
 
 def law(n, cohesion=True, c=1e7):
@@ -158,7 +180,7 @@ def test_residual_with_cohesion_is_continuous_where_a_face_opens(phi):
     gpen = np.zeros((2, 3))
     gpen[:, 0] = gn
     gpen[:, 1] = 1e-4
-    tp, _, stp = ct.penalty_traction(lw[np.arange(2)], gpen, np.zeros((2, 3)), np.zeros((2, 3)))
+    tp, stp = penalty_traction(lw[np.arange(2)], gpen, np.zeros((2, 3)), np.zeros((2, 3)), np.zeros(2))
     assert list(stp) == [ct.SLIP, ct.OPEN]
     assert np.abs(tp[0] - tp[1]).max() < 1e-6 * strength
 
@@ -176,16 +198,37 @@ def test_fresh_fault_starts_closed():
     assert list(ct.states(lw, z, z, z)) == [ct.STICK] * 3
 
 
-def test_penalty_derivatives_in_each_state():
-    n = 60
-    g = RNG.normal(size=(n, 3)) * 1e-3
-    gp = RNG.normal(size=(n, 3)) * 1e-3
-    tp = RNG.normal(size=(n, 3)) * 1e4
-    lw = ct.FaceLaw(np.ones(n), np.full(n, 1e3), np.full(n, 0.5), np.full(n, 1e9), np.full(n, 1e9))
-    t, d, state = ct.penalty_traction(lw, g, gp, tp)
+@pytest.mark.parametrize("c", [1e5, 1e7, 1e9])
+def test_penalty_faces_rows_vanish_at_the_penalty_law(c):
+    """What the solver runs on a penalty face: the Lagrange rows on its compliant jump (``penalty_jump``). At the
+    traction of the penalty return map (stuck, slipping and open faces, with and without cohesion, an initial normal
+    traction) the rows are zero and the face is in the law's state, whatever the augmentation c of the rows."""
+    n = 300
+    k = RNG.uniform(1e8, 1e10, n)
+    pen = ct.FaceLaw(RNG.uniform(0.5, 2.0, n), np.where(np.arange(n) % 2 == 0, 0.0, RNG.uniform(0, 1e5, n)),
+                     np.full(n, TAN30), k, RNG.uniform(0.5, 1.0, n) * k)
+    rows = ct.FaceLaw(pen.area, pen.cohesion, pen.tan_phi, np.full(n, c), np.full(n, 0.7 * c))
+    g = RNG.normal(size=(n, 3)) * 1e-4
+    g_prev = RNG.normal(size=(n, 3)) * 1e-4
+    t0_n = -RNG.uniform(0.0, 2e5, n)
+    t_prev = np.column_stack([t0_n, RNG.normal(size=(n, 2)) * 2e4])
+    t, state = penalty_traction(pen, g, g_prev, t_prev, t0_n)
     assert set(np.unique(state)) == {ct.STICK, ct.SLIP, ct.OPEN}
-    err = fd_check(lambda x: ct.penalty_traction(lw, x, gp, tp)[0], g, d, h=1e-10)
-    assert err < 1e-4
+    g_law = ct.penalty_jump(pen, g, t, t0_n)
+    g_prev_law = ct.penalty_jump(pen, g_prev, t_prev, t0_n)
+    st, r, _, _ = ct.lagrange_rows(rows, g_law, g_prev_law, t)
+    assert np.array_equal(st, state)
+    assert np.abs(r).max() < 1e-9 * np.abs(t).max() * pen.area.max()
+
+
+def test_penalty_jump_derivative():
+    """d(penalty_jump)/dt = -1/k per component: what the fault term adds to a penalty face's dr/dt."""
+    n = 20
+    pen = law(n)
+    g, t, t0 = RNG.normal(size=(n, 3)), RNG.normal(size=(n, 3)) * 1e5, RNG.normal(size=n) * 1e5
+    d = np.zeros((n, 3, 3))
+    d[:, 0, 0], d[:, 1, 1], d[:, 2, 2] = -1.0 / pen.c_n, -1.0 / pen.c_t, -1.0 / pen.c_t
+    assert fd_check(lambda x: ct.penalty_jump(pen, g, x, t0), t, d, h=1.0) < 1e-12
 
 
 def test_frames_are_orthonormal_and_right_handed():
