@@ -168,7 +168,7 @@ CASES = [
          "-pfault_mesh_file: no such file 'nowhere.msh'"),
     # material properties from spatial fields (pfault.properties): checked before anything is written
     Case("field_with_nans", field_scene("young_modulus", "z,E [MPa]\n-100,10\n-50,nan\n0,10\n"), 1,
-         "field.csv: 1 of 3 E are NaN or infinite; fill them (or remove those points) and run again"),
+         "field.csv: 1 of 3 E are NaN or infinite (line 3); fill them (or remove those points) and run again"),
     Case("field_negative_modulus", field_scene("young_modulus", "z,E [MPa]\n-100,10\n0,-10\n"), 1,
          "field.csv: 1 values are not positive (e.g. -1e+07); fix the file's values"),
     Case("field_poisson_ratio_one_half", field_scene("poisson_ratio", "z,nu\n-100,0.3\n0,0.5\n"), 1,
