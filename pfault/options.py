@@ -85,9 +85,11 @@ SPECS = [
     _s("pfault_material_<material>_density", "property", 2000.0, "kg/m**3", "bulk (saturated) density, used "
        "by the geostatic initial stress"),
     _s("pfault_material_<material>_head_drawdown", "table", None, "m", "drawdown of hydraulic head as "
-       "time:value pairs, linear in between (dp = -rho_w g h); positive is a drop"),
+       "time:value pairs, linear in between, the last value held after the last time (dp = -rho_w g h); "
+       "positive is a drop"),
     _s("pfault_material_<material>_pressure_change", "table", None, "Pa", "pore-pressure change as "
-       "time:value pairs, linear in between; negative is a drawdown"),
+       "time:value pairs, linear in between, the last value held after the last time; negative is a "
+       "drawdown"),
     _s("pfault_material_<material>_hydraulic_conductivity", "property", None, "m/s", "isotropic hydraulic "
        "conductivity K (required with -pfault_flow)"),
     _s("pfault_material_<material>_specific_storage", "property", None, "1/m", "specific storage S_s (default: "
@@ -103,7 +105,7 @@ SPECS = [
        "displacement"),
     _s("pfault_bc_<surface>_components", "names", "x,y,z", "", "components prescribed by type displacement"),
     _s("pfault_bc_<surface>_history", "table", None, "", "time:scale table multiplying the surface's "
-       "traction and displacement (default: constant 1)"),
+       "traction and displacement, the last value held after the last time (default: constant 1)"),
     # faults
     _s("pfault_faults", "names", "", "", "physical surfaces that are faults (split, with contact and friction)"),
     _s("pfault_fault_<fault>_cohesion", "quantity", 0.0, "Pa", "cohesion c of the Mohr-Coulomb criterion (a "

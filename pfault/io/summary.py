@@ -55,6 +55,8 @@ class RunSummary:
         if m.faults is not None:
             summary["faults"] = fault_summary(m, last)
         summary.update(summary_maxima(last, m.settings.hazard_strain_threshold))
+        if m.scene.warnings:
+            summary["warnings"] = list(m.scene.warnings)
         if stop is not None:
             summary["stop_signal"] = stop
         if m.scene.restart_dir:

@@ -379,6 +379,31 @@ def test_duplicate_option_in_one_file_warns(tmp_path, ranks):
         assert len(json.load(fh)["steps"]) == 3
 
 
+def test_input_warnings_are_printed_once_and_kept(tmp_path):
+    """The oedometer's table in bare seconds (0:0,10:-0.1*MPa) under a run of 10*year, and a modulus map whose grid
+    misses a node, on 2 ranks: each warning printed once, both in summary.json; the run completes with the whole
+    load at the first step (the analytic settlement 0.83333 m at every step; the map is 10 MPa everywhere)."""
+    field = write(tmp_path / "map.csv", "x,y,E [MPa]\n0,0,10\n10,0,10\n0,10,10\n10,10,10\n5,0,10\n5,10,10\n"
+                                        "0,5,10\n10,5,10\n")                   # a 3 x 3 grid without (5, 5)
+    out = tmp_path / "out"
+    code, _, stderr = run_pfault(["-m", "pfault", OED, "-pfault_output_dir", str(out), "-pfault_time_end", "10*year",
+                                  "-pfault_time_steps", "2", "-pfault_figures", "false",
+                                  "-pfault_material_soil_young_modulus", f"field:{field}"], 2)
+    assert code == 0, stderr
+    warnings = [line for line in stderr.splitlines() if line.startswith("pfault: warning")]
+    assert warnings == [
+        "pfault: warning: -pfault_material_soil_pressure_change: the table ends at t = 10 s, before the run's first "
+        "step (t = 5 year): every step takes its last value and the run sees none of its changes; its times have no "
+        "unit, so they are seconds: give them in the run's unit (e.g. 10*year)",
+        f"pfault: warning: -pfault_material_soil_young_modulus field:{field}: the 8 points lie on the 3 x 3 grid of "
+        "their distinct x, y values but leave 1 of its nodes empty (e.g. x = 5, y = 5); they are read as scattered "
+        "points (linear between neighbouring points), not as a grid; give every node of the grid once for "
+        "(multi)linear interpolation on it"], stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["warnings"] == warnings
+    assert [r["max_subsidence_m"] for r in summary["steps"]] == pytest.approx([0.8333333333] * 2, rel=1e-9)
+
+
 def test_command_line_override_and_duplicates(tmp_path):
     """The command line overriding the scene says nothing; an option twice on the command line warns."""
     out = str(tmp_path / "out")
