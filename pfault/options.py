@@ -190,11 +190,12 @@ SPECS = [
     _s("pfault_stations", "string", "", "", "CSV file of stations, header name,x,y,z[,side] (site coordinates, m; "
        "side plus|minus: the side a station on a fault takes, default minus): their displacement at time 0 and after "
        "every step in station_displacement.csv and .h5"),
-    _s("pfault_insar_los", "list", "", "", "unit vector e,n,u from the ground to the satellite: the land surface's "
+    _s("pfault_insar_los", "list", "", "", "unit vector e,n,u from the ground to the satellite (u > 0; e.g. "
+       "-0.61,-0.11,0.785 for Sentinel-1 ascending): the land surface's "
        "line-of-sight displacement (positive towards the satellite) and its rate at every output time on a raster, "
        "insar_los.nc (CF NetCDF) and insar_los.png"),
     _s("pfault_insar_spacing", "quantity", None, "m", "pixel size of the LOS raster (default: the mean edge length "
-       "of the land surface's triangles)"),
+       "of the land surface's triangles); a raster that would not fit in memory is refused"),
     _s("pfault_hazard_strain_threshold", "quantity", 2e-4, "", "horizontal tensile strain of the land surface "
        "above which it is fissure-prone (2e-4: within the 1e-4 to 7e-4 measured across active earth fissures): "
        "summary.json's fissure-prone length and area"),

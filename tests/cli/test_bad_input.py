@@ -199,8 +199,13 @@ CASES = [
     Case("station_file_missing", scene("-pfault_stations", "no_such_stations.csv"), 1,
          "-pfault_stations no_such_stations.csv: no such file; give a CSV file whose first line names the columns"),
     Case("los_not_a_unit_vector", scene("-pfault_insar_los", "1,0,1"), 1,
-         "-pfault_insar_los 1,0,1: not a unit vector (length 1.414); give the east, north, up components of the unit "
-         "vector from the ground to the satellite"),
+         "-pfault_insar_los 1,0,1: not a unit vector (length 1.414; rounded direction cosines are within 0.01 of 1 "
+         "and pfault normalises them); give the east, north, up components of the unit vector from the ground to the "
+         "satellite"),
+    Case("insar_raster_beyond_memory", scene("-pfault_box_size", "2000,2000,100", "-pfault_insar_los", "0,0,1",
+                                             "-pfault_insar_spacing", "1*mm"), 5,
+         "-pfault_insar_spacing 0.001 m: the raster over the land surface (2000 x 2000 m) would have 4e+12 pixels "
+         "(2e+06 x 2e+06) and need about "),
     Case("insar_spacing_not_positive", scene("-pfault_insar_los", "0,0,1", "-pfault_insar_spacing", "0"), 1,
          "-pfault_insar_spacing 0: the pixel size must be positive (m)"),
     # boundary conditions that do not hold the body: exit 1, found from the constraints before any solve
