@@ -261,8 +261,26 @@ def _closest_unit(t: float, end: float) -> str:
     return min(names, key=lambda u: abs(np.log(max(t, 1e-300) * UNITS[u][0] / end)))
 
 
+def check_no_fault_boundaries(reader: OptionReader, fault_names: Iterable[str]) -> None:
+    """A surface that is a fault has no boundary conditions: a fault is an interior surface (cells on both sides,
+    split and held by contact), boundary conditions act on the outer boundary; options for both say the scene
+    names the wrong surface in one of them."""
+    from .options import SPECS
+    keys = [s.name[len("pfault_bc_<surface>_"):] for s in SPECS if s.name.startswith("pfault_bc_<surface>_")]
+    for name in fault_names:
+        given = [f"-pfault_bc_{name}_{k}" for k in keys if reader.has(f"pfault_bc_{name}_{k}")]
+        if given:
+            raise InputError(f"-pfault_faults: '{name}' is a fault and has boundary conditions ({', '.join(given)}); "
+                             "a fault must be an interior surface of the mesh, boundary conditions act on its outer "
+                             f"boundary: remove '{name}' from -pfault_faults or remove its -pfault_bc_{name}_* "
+                             "options")
+
+
 def read_boundaries(reader: OptionReader, surface_names: Iterable[str],
                     exclude: Collection[str] = ()) -> list[Boundary]:
+    """The boundary conditions of the surfaces ``surface_names`` but those in ``exclude`` (the faults, which may
+    have none: check_no_fault_boundaries)."""
+    check_no_fault_boundaries(reader, [n for n in surface_names if n in exclude])
     bcs = []
     for name in surface_names:
         if name in exclude:

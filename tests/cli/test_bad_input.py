@@ -218,6 +218,10 @@ CASES = [
     Case("fault_scene_pulled_loose", lambda tmp, out, ranks: [
         "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_bc_xmin_type",
         "traction"], 1, "free to translate along x and to rotate about y"),
+    Case("fault_on_the_outer_boundary_with_bcs", scene("-pfault_faults", "xmax"), 1,
+         "-pfault_faults: 'xmax' is a fault and has boundary conditions (-pfault_bc_xmax_type); a fault must be an "
+         "interior surface of the mesh, boundary conditions act on its outer boundary: remove 'xmax' from "
+         "-pfault_faults or remove its -pfault_bc_xmax_* options"),
     Case("negative_tensile_strength", lambda tmp, out, ranks: [
         "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_fault_fault_tensile_strength",
         "-50*kPa"], 1, "-pfault_fault_fault_tensile_strength: must not be negative (0: a pre-existing fault)"),
