@@ -1,7 +1,7 @@
 """Checks of a scene made before anything is solved or written, each raising one-line errors.
 
 - the output directory can be created and written, and its disk has room for the run's output;
-- a box mesh fits this PETSc's indices and this machine's memory;
+- a box mesh fits this PETSc's indices and this machine's memory, and so does an InSAR raster;
 - the Dirichlet conditions hold the body against rigid-body motion.
 
 Each runs on one rank (rank 0 under ``pfault.errors.run_on_root``, which shares the verdict).
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Iterator, Sequence
 
 import numpy as np
 
@@ -108,6 +108,49 @@ def check_box_memory(cells: Sequence[int]) -> None:
     if avail is not None and need > avail:
         raise OutOfMemory(f"-pfault_box_cells {text}: building the mesh alone needs about {_gb(need)}, more "
                           f"than the {_gb(avail)} of memory available; use fewer cells")
+
+
+# -- InSAR raster ------------------------------------------------------------------------------------
+# Bytes a pixel of the LOS raster costs at the peak, measured as the resident-set peak of runs of a 2 km box
+# (-pfault_box_size 2000,2000,100 -pfault_box_cells 10,10,1) at spacings 8, 2 and 1 m (62,500 to 4e6 pixels),
+# summary.json's memory_peak_mib against the pixel count: rank 0, which locates the pixels in the land surface's
+# triangles (pfault.io.probes.locate_pixels: its candidate pairs), 343-359 B; every other rank, which receives
+# every pixel's location and evaluates its own, 204 B. Rounded up.
+PIXEL_BYTES_ROOT = 400
+PIXEL_BYTES_RANK = 250
+
+
+def check_raster_memory(shape: Sequence[float], extent: Sequence[float], spacing: float, default: float,
+                        ranks_on_node: int = 1) -> None:
+    """The LOS raster of ``shape`` (nx, ny pixels, floats: a count need not fit an integer) over the land
+    surface's ``extent`` (m) at ``spacing`` fits the memory available on rank 0's node, which ``ranks_on_node``
+    ranks share; otherwise OutOfMemory naming -pfault_insar_spacing, the pixels and a spacing that fits
+    (``default``: the land surface's mean edge, the option's default). Before anything of it is allocated."""
+    avail = available_memory()
+    per_pixel = PIXEL_BYTES_ROOT + PIXEL_BYTES_RANK * (max(int(ranks_on_node), 1) - 1)
+    pixels = float(np.prod(shape))
+    if avail is None or pixels * per_pixel <= avail:
+        return
+    fit = next(s for s in _round_spacings(spacing)
+               if np.prod(np.ceil(np.asarray(extent) / s) + 1) * per_pixel <= avail)
+    nx, ny = shape
+    ranks = f"{ranks_on_node} rank{'s' if ranks_on_node > 1 else ''}"
+    raise OutOfMemory(f"-pfault_insar_spacing {spacing:g} m: the raster over the land surface ({extent[0]:g} x "
+                      f"{extent[1]:g} m) would have {pixels:.3g} pixels ({nx:.3g} x {ny:.3g}) and need about "
+                      f"{_gb(pixels * per_pixel)} ({per_pixel} B a pixel with {ranks} on this node), "
+                      f"more than the {_gb(avail)} of memory available; give a spacing of at least {fit:g} m "
+                      f"(e.g. -pfault_insar_spacing {fit:g}*m; without the option, the land surface's mean edge, "
+                      f"{default:.3g} m)")
+
+
+def _round_spacings(spacing: float) -> Iterator[float]:
+    """1, 2, 5 times powers of ten above ``spacing``, in increasing order."""
+    k = int(np.floor(np.log10(spacing)))
+    while True:
+        for m in (1, 2, 5):
+            if m * 10.0 ** k > spacing:
+                yield m * 10.0 ** k
+        k += 1
 
 
 # -- rigid-body motion ------------------------------------------------------------------------------

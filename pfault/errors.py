@@ -225,6 +225,15 @@ def run_on_all(comm: Any, func: Callable[..., Any], *args: Any, wait: float = SH
     return result
 
 
+def warn(comm: Any, text: str) -> str:
+    """Print the warning ``text`` once, on rank 0, as the line ``pfault: warning: text``; returns the line
+    (summary.json keeps a run's warnings). Called by every rank with the same text."""
+    line = f"pfault: warning: {text}"
+    if _mpi(comm).rank == 0:
+        write_line(line)
+    return line
+
+
 def write_line(text: str) -> None:
     sys.stderr.write(text + "\n")
     sys.stderr.flush()

@@ -20,7 +20,7 @@ from . import checks, fields, properties, scene as scn
 from .assembly.elastic import ElasticAssembler
 from .effects import logged
 from .effects import decide as decide_effects
-from .errors import InputError, run_on_root
+from .errors import InputError, run_on_root, warn
 from .mesh import distributed
 from .solver.equations import Equations, constrained_local
 from .solver.choice import AUTO, ITERATIVE_FROM_DOFS, solver_file_name
@@ -51,6 +51,7 @@ class Scene:
     effects: Any
     heads_settings: Any = None      # a groundwater model's heads (pfault.sources.heads.HeadsSettings), or None
     mesh_origin: tuple = (0.0, 0.0, 0.0)    # site coordinates = mesh coordinates + mesh_origin (m)
+    warnings: tuple = ()            # the warning lines printed about the scene's input (summary.json keeps them)
 
 
 @dataclass(frozen=True)
@@ -147,22 +148,34 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     boundaries = scn.read_boundaries(reader, surface_names, exclude=fault_names)
     contact = scn.read_contact_options(reader) if fault_names else None
     reader.check_pfault_options()
+    warnings = tuple(warn(comm, text) for text in scn.time_table_warnings(reader, s))
     effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries,
                              heads=heads_settings.file if heads_settings is not None else "")
     scene = Scene(s, restart_dir, figures, solver_name, material_names, surface_names,
                   materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects,
-                  heads_settings, mesh_origin)
+                  heads_settings, mesh_origin, warnings)
     return scene, serial
 
 
-def _field_values(scene: Scene, serial: Any, options_file: str) -> dict:
+def _field_values(scene: Scene, serial: Any, options_file: str) -> tuple[dict, list]:
     """Rank 0: the material properties given as fields, on the serial cells ({option: values}; empty without
-    fields)."""
+    fields), and the notes on how their files were read (pfault.io.field_files.SpatialField.note)."""
     refs = properties.field_refs(scene.materials, scene.flow_settings)
+    notes: list = []
     if not refs:
-        return {}
+        return {}, notes
     return properties.serial_field_values(scene.material_names, refs, serial.points, serial.tets,
-                                          serial.cell_material, options_file, scene.mesh_origin)
+                                          serial.cell_material, options_file, scene.mesh_origin, notes), notes
+
+
+def _read_fields(comm: Any, scene: Scene, serial: Any, options_file: str) -> tuple[Scene, dict | None]:
+    """The field options' values (rank 0, _field_values; None elsewhere), and the scene with their files' notes
+    among its warnings (every rank; printed once)."""
+    serial_values, notes = run_on_root(comm, _field_values, scene, serial, options_file) or (None, None)
+    notes = comm.tompi4py().bcast(notes)
+    if notes:
+        scene = dataclasses.replace(scene, warnings=scene.warnings + tuple(warn(comm, text) for text in notes))
+    return scene, serial_values
 
 
 def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
@@ -248,7 +261,7 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     stage.push()
     scene, serial = read_scene(comm, reader, options_file)
     PETSc.Sys.Print("pfault:", scene.effects.line())
-    serial_values = run_on_root(comm, _field_values, scene, serial, options_file)
+    scene, serial_values = _read_fields(comm, scene, serial, options_file)
     arr = run_on_root(comm, _serial_arrays, scene, serial, serial_values)
     (mask, face_tag, ground), split, topology = arr if arr is not None else ((None, None, None), None, None)
     mesh = distributed.build(comm, serial, cell_face_tag=face_tag, vert_constraint=mask, vert_ground=ground,

@@ -85,9 +85,11 @@ SPECS = [
     _s("pfault_material_<material>_density", "property", 2000.0, "kg/m**3", "bulk (saturated) density, used "
        "by the geostatic initial stress"),
     _s("pfault_material_<material>_head_drawdown", "table", None, "m", "drawdown of hydraulic head as "
-       "time:value pairs, linear in between (dp = -rho_w g h); positive is a drop"),
+       "time:value pairs, linear in between, the last value held after the last time (dp = -rho_w g h); "
+       "positive is a drop"),
     _s("pfault_material_<material>_pressure_change", "table", None, "Pa", "pore-pressure change as "
-       "time:value pairs, linear in between; negative is a drawdown"),
+       "time:value pairs, linear in between, the last value held after the last time; negative is a "
+       "drawdown"),
     _s("pfault_material_<material>_hydraulic_conductivity", "property", None, "m/s", "isotropic hydraulic "
        "conductivity K (required with -pfault_flow)"),
     _s("pfault_material_<material>_specific_storage", "property", None, "1/m", "specific storage S_s (default: "
@@ -103,7 +105,7 @@ SPECS = [
        "displacement"),
     _s("pfault_bc_<surface>_components", "names", "x,y,z", "", "components prescribed by type displacement"),
     _s("pfault_bc_<surface>_history", "table", None, "", "time:scale table multiplying the surface's "
-       "traction and displacement (default: constant 1)"),
+       "traction and displacement, the last value held after the last time (default: constant 1)"),
     # faults
     _s("pfault_faults", "names", "", "", "physical surfaces that are faults (split, with contact and friction)"),
     _s("pfault_fault_<fault>_cohesion", "quantity", 0.0, "Pa", "cohesion c of the Mohr-Coulomb criterion (a "
@@ -188,11 +190,12 @@ SPECS = [
     _s("pfault_stations", "string", "", "", "CSV file of stations, header name,x,y,z[,side] (site coordinates, m; "
        "side plus|minus: the side a station on a fault takes, default minus): their displacement at time 0 and after "
        "every step in station_displacement.csv and .h5"),
-    _s("pfault_insar_los", "list", "", "", "unit vector e,n,u from the ground to the satellite: the land surface's "
+    _s("pfault_insar_los", "list", "", "", "unit vector e,n,u from the ground to the satellite (u > 0; e.g. "
+       "-0.61,-0.11,0.785 for Sentinel-1 ascending): the land surface's "
        "line-of-sight displacement (positive towards the satellite) and its rate at every output time on a raster, "
        "insar_los.nc (CF NetCDF) and insar_los.png"),
     _s("pfault_insar_spacing", "quantity", None, "m", "pixel size of the LOS raster (default: the mean edge length "
-       "of the land surface's triangles)"),
+       "of the land surface's triangles); a raster that would not fit in memory is refused"),
     _s("pfault_hazard_strain_threshold", "quantity", 2e-4, "", "horizontal tensile strain of the land surface "
        "above which it is fissure-prone (2e-4: within the 1e-4 to 7e-4 measured across active earth fissures): "
        "summary.json's fissure-prone length and area"),

@@ -140,14 +140,17 @@ def check_range(ref: FieldRef, field: Any) -> None:
                          "values (in the option's unit unless the file states its own)")
 
 
-def read_fields(refs: Sequence[FieldRef], scene_file: str) -> dict[str, Any]:
-    """{option: SpatialField} of the field options, read and checked (rank 0)."""
+def read_fields(refs: Sequence[FieldRef], scene_file: str, notes: list | None = None) -> dict[str, Any]:
+    """{option: SpatialField} of the field options, read and checked (rank 0); the files' notes (points that
+    look like a grid and are not one) are appended to ``notes``."""
     from .io.field_files import read_field
     out = {}
     for ref in refs:
         prop = property_name(ref.option)
         field = read_field(beside_scene(ref.path, scene_file), ref.option, ref.unit, ref.variable, prop)
         check_range(ref, field)
+        if field.note and notes is not None:
+            notes.append(field.note)
         out[ref.option] = field
     return out
 
@@ -164,11 +167,11 @@ def field_refs(materials: Sequence[Any], flow: Any = None) -> list[FieldRef]:
 
 def serial_field_values(names: Sequence[str], refs: Sequence[FieldRef], points: np.ndarray, tets: np.ndarray,
                         cell_material: np.ndarray, scene_file: str,
-                        origin: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, np.ndarray]:
+                        origin: Sequence[float] = (0.0, 0.0, 0.0), notes: list | None = None) -> dict[str, np.ndarray]:
     """{option: values on the cells of its material (serial order; NaN on the others)} of every field option
     (rank 0, on the serial mesh whose materials are ``names``; fields are given in site coordinates, mesh +
-    ``origin``)."""
-    fields = read_fields(refs, scene_file)
+    ``origin``); the files' notes are appended to ``notes`` (read_fields)."""
+    fields = read_fields(refs, scene_file, notes)
     centroids = mesh_to_site(points[tets].mean(axis=1), origin)
     out = {}
     for ref in refs:

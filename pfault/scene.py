@@ -16,6 +16,7 @@ import numpy as np
 from .errors import InputError
 from .physics.loading import MaterialDrawdown, Table
 from .properties import FieldRef, is_field
+from .units import UNITS, format_duration, quantity_unit
 
 if TYPE_CHECKING:
     from .faults.settings import ContactSettings, FaultSettings
@@ -205,8 +206,81 @@ def read_drawdown(reader: OptionReader, names: Iterable[str], water_density: flo
     return MaterialDrawdown(tables)
 
 
+def time_table_warnings(reader: OptionReader, settings: Settings) -> list[str]:
+    """Warnings about the time tables read so far (every table option: pore-pressure tables, boundary
+    histories, well rates) that the run's time grid does not see as they were likely meant. A table holds its
+    first value before its first time and its last after its last time (pfault.physics.loading.Table), which is
+    what a table that ends inside the run is for (pumping, then a pause); but one that ends before the first
+    step changes only where no step looks (its times in bare seconds under a run in years, the unit left out),
+    and a run in bare seconds that ends before a table in years reaches its second time sees almost none of
+    it (the unit left out of -pfault_time_end)."""
+    from .options import spec_for
+    end_text = reader.raw("pfault_time_end") or ""
+    out = []
+    for name, pairs in sorted(reader.resolved.items()):
+        spec = spec_for(name)
+        if spec is None or spec.kind != "table" or not pairs:
+            continue
+        line = table_warning(name, reader.raw(name) or "", pairs, settings.time_end, settings.time_steps, end_text)
+        if line:
+            out.append(line)
+    return out
+
+
+def table_warning(name: str, text: str, pairs: Sequence[tuple], end: float, steps: int,
+                  end_text: str = "") -> str | None:
+    """The warning about the table of option ``name`` (``text`` as given, ``pairs`` (time in s, value)) in a run
+    of ``steps`` equal steps to ``end`` s (-pfault_time_end as given: ``end_text``), or None."""
+    if len({v for _, v in pairs}) < 2:
+        return None         # constant: nothing of it happens at one time rather than another
+    first, end_unit = end / steps, quantity_unit(end_text)
+    units = {quantity_unit(item.split(":")[0]) for item in text.split(",") if ":" in item}
+    units.discard(None)
+    bare = not units - {"s", "second"}              # its times are in seconds, with or without saying so
+    end_bare = end_unit in (None, "s", "second")
+    t_last = pairs[-1][0]
+    if t_last < first * (1.0 - 1e-9):
+        hint = (f"; its times have no unit, so they are seconds: give them in the run's unit (e.g. "
+                f"{t_last:g}*{_closest_unit(t_last, end) if end_bare else end_unit})" if bare
+                else "; check its times, or give more steps (-pfault_time_steps)")
+        return (f"-{name}: the table ends at t = {format_duration(t_last)}, before the run's first step (t = "
+                f"{format_duration(first)}): every step takes its last value and the run sees none of its "
+                f"changes{hint}")
+    t_second = pairs[1][0] if len(pairs) > 1 else t_last
+    if end_bare and not bare and end < t_second:
+        unit = sorted(units - {"s", "second"})[0]
+        return (f"-pfault_time_end {end_text.strip() or f'{end:g} (the default)'} has no unit, so it is in seconds, "
+                f"and the run ends before -{name} reaches its second time ({format_duration(t_second)}); give "
+                f"-pfault_time_end a unit (e.g. {end:g}*{unit})")
+    return None
+
+
+def _closest_unit(t: float, end: float) -> str:
+    """The time unit that makes ``t`` of it nearest (logarithmically) to the run's length ``end``."""
+    names = ("minute", "hour", "day", "year")
+    return min(names, key=lambda u: abs(np.log(max(t, 1e-300) * UNITS[u][0] / end)))
+
+
+def check_no_fault_boundaries(reader: OptionReader, fault_names: Iterable[str]) -> None:
+    """A surface that is a fault has no boundary conditions: a fault is an interior surface (cells on both sides,
+    split and held by contact), boundary conditions act on the outer boundary; options for both say the scene
+    names the wrong surface in one of them."""
+    from .options import SPECS
+    keys = [s.name[len("pfault_bc_<surface>_"):] for s in SPECS if s.name.startswith("pfault_bc_<surface>_")]
+    for name in fault_names:
+        given = [f"-pfault_bc_{name}_{k}" for k in keys if reader.has(f"pfault_bc_{name}_{k}")]
+        if given:
+            raise InputError(f"-pfault_faults: '{name}' is a fault and has boundary conditions ({', '.join(given)}); "
+                             "a fault must be an interior surface of the mesh, boundary conditions act on its outer "
+                             f"boundary: remove '{name}' from -pfault_faults or remove its -pfault_bc_{name}_* "
+                             "options")
+
+
 def read_boundaries(reader: OptionReader, surface_names: Iterable[str],
                     exclude: Collection[str] = ()) -> list[Boundary]:
+    """The boundary conditions of the surfaces ``surface_names`` but those in ``exclude`` (the faults, which may
+    have none: check_no_fault_boundaries)."""
+    check_no_fault_boundaries(reader, [n for n in surface_names if n in exclude])
     bcs = []
     for name in surface_names:
         if name in exclude:

@@ -104,6 +104,25 @@ def parse_quantity(text: str, option: str = "value", unit: str | None = None) ->
     return value
 
 
+def quantity_unit(text: str) -> str | None:
+    """The unit written in a quantity (``10*year`` -> 'year'), None for a bare number (or text that is not a
+    quantity)."""
+    m = _QUANTITY.match(str(text))
+    return m.group(2) if m else None
+
+
+TIME_UNITS = ("year", "day", "hour", "minute", "s")
+
+
+def format_duration(t: float) -> str:
+    """``t`` seconds in the largest time unit it holds at least once of, for messages: '10 year', '36.5 day',
+    '10 s'."""
+    for name in TIME_UNITS:
+        if abs(t) >= UNITS[name][0] or name == "s":
+            return f"{t / UNITS[name][0]:.4g} {name}"
+    raise AssertionError(t)
+
+
 def parse_list(text: str, option: str = "value", unit: str | None = None) -> list[float]:
     """Comma-separated list of quantities."""
     items = [s for s in str(text).split(",") if s.strip()]

@@ -32,9 +32,11 @@ from .probes import Located, PointProbe, Raster
 NC_NAME = "insar_los.nc"
 PNG_NAME = "insar_los.png"
 FILL = -9999.0          # _FillValue of the pixels outside the land surface
-# |los| within this of 1 is a unit vector (direction cosines rounded to two decimals are up to ~0.009 off); it is
-# normalised
+# |los| within this of 1 is a unit vector whose direction cosines were rounded (to two decimals they are up to ~0.009
+# off) and is normalised; a length further off is not the cosines of a direction (angles, a scaled vector) and is
+# an error
 UNIT_TOL = 0.01
+EXAMPLE = "-0.61,-0.11,0.785"       # Sentinel-1 ascending, incidence about 38 degrees: west, a little south, up
 
 
 @dataclass(frozen=True)
@@ -46,21 +48,40 @@ class InsarSettings:
 def read_insar_settings(reader: Any) -> InsarSettings | None:
     """-pfault_insar_los and -pfault_insar_spacing (every rank); None without a LOS vector."""
     los = reader.get("pfault_insar_los")
-    if not los:
-        return None
-    text = ",".join(f"{v:g}" for v in los)
-    if len(los) != 3:
-        raise InputError(f"-pfault_insar_los {text}: give three components e,n,u of the unit vector from the ground "
-                         "to the satellite (e.g. -0.61,-0.11,0.785)")
-    v = np.array(los, dtype=np.float64)
-    norm = float(np.linalg.norm(v))
-    if abs(norm - 1.0) > UNIT_TOL:
-        raise InputError(f"-pfault_insar_los {text}: not a unit vector (length {norm:.4g}); give the east, north, "
-                         "up components of the unit vector from the ground to the satellite (e.g. -0.61,-0.11,0.785)")
     spacing = reader.get("pfault_insar_spacing")
+    if not los:
+        if spacing is not None:
+            raise InputError(f"-pfault_insar_spacing {spacing:g}: no raster without -pfault_insar_los; give the "
+                             f"line-of-sight vector (e.g. -pfault_insar_los {EXAMPLE}) or remove the spacing")
+        return None
+    v = np.array(los, dtype=np.float64)
+    check_los(v)
     if spacing is not None and not spacing > 0:
         raise InputError(f"-pfault_insar_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
-    return InsarSettings(v / norm, spacing)
+    return InsarSettings(v / np.linalg.norm(v), spacing)
+
+
+def check_los(v: np.ndarray) -> None:
+    """The LOS vector is pfault's convention: the unit vector from the ground to the satellite (east, north, up),
+    so its up component is positive (a satellite looks down), and its length is 1 (rounded cosines within
+    UNIT_TOL are normalised)."""
+    text = ",".join(f"{x:g}" for x in v)
+    what = "the east, north, up components of the unit vector from the ground to the satellite"
+    if len(v) != 3:
+        raise InputError(f"-pfault_insar_los {text}: give three components e,n,u: {what} (e.g. {EXAMPLE})")
+    if v[2] < 0:
+        flipped = ",".join(f"{-x:g}" for x in v)
+        raise InputError(f"-pfault_insar_los {text}: the up component is negative, a vector from the satellite "
+                         f"into the ground; pfault takes {what} (up positive, LOS positive towards the satellite): "
+                         f"give -pfault_insar_los {flipped}")
+    if v[2] == 0:
+        raise InputError(f"-pfault_insar_los {text}: the up component is 0 (a satellite looks down, u = cos of the "
+                         f"incidence angle); give {what} (e.g. {EXAMPLE})")
+    norm = float(np.linalg.norm(v))
+    if abs(norm - 1.0) > UNIT_TOL:
+        raise InputError(f"-pfault_insar_los {text}: not a unit vector (length {norm:.4g}; rounded direction "
+                         f"cosines are within {UNIT_TOL:g} of 1 and pfault normalises them); give {what} (e.g. "
+                         f"{EXAMPLE})")
 
 
 def check_continuation(raster: Raster, los: np.ndarray, run_dir: str) -> dict[str, np.ndarray]:

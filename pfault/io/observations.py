@@ -53,8 +53,12 @@ class Observations:
             stations = share(locate_stations, settings.stations_file, model.serial, model.split,
                              model.scene.mesh_origin)
         if settings.insar is not None:
+            from mpi4py import MPI
+            node = mpi.Split_type(MPI.COMM_TYPE_SHARED)     # the ranks of each node: rank 0 counts those of its own
+            ranks_on_node = mpi.bcast(node.size if mpi.rank == 0 else None, root=0)
+            node.Free()
             pixels = share(locate_pixels, model.serial, model.settings.ground_surface, settings.insar.spacing,
-                           model.scene.mesh_origin)
+                           model.scene.mesh_origin, ranks_on_node)
         restart_dir = model.scene.restart_dir
         if restart_dir:         # the files of the run it continues are there, for the same points (before a solve)
             if stations is not None:

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import check_raster_memory
 from ..errors import InputError
 from ..mesh.serial import TET_FACES, locate_faces
 
@@ -128,10 +129,12 @@ def ground_faces(serial: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def locate_pixels(serial: Any, ground: str, spacing: float | None,
-                  origin: Sequence[float] = (0.0, 0.0, 0.0)) -> tuple[Raster, Located]:
+                  origin: Sequence[float] = (0.0, 0.0, 0.0), ranks_on_node: int = 1) -> tuple[Raster, Located]:
     """Rank 0: the raster over the land surface and, for each pixel inside it (in row-major order of
     ``inside``), the tetrahedron under the surface triangle below its centre and the P1 weights there. A centre
-    on an edge or a vertex shared by several triangles takes the one of the smallest cell id, as a station does."""
+    on an edge or a vertex shared by several triangles takes the one of the smallest cell id, as a station does.
+    A raster that would not fit in the memory of this node (``ranks_on_node`` ranks on it) is an error before
+    it is made (pfault.checks.check_raster_memory)."""
     cell, lface = ground_faces(serial, ground)
     if not len(cell):
         raise InputError(f"-pfault_insar_los: the mesh has no land surface (-pfault_ground_surface {ground}, nor "
@@ -144,9 +147,11 @@ def locate_pixels(serial: Any, ground: str, spacing: float | None,
                   - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1]))
     flat = np.abs(area) > 1e-9 * np.abs(area).max()                 # vertical triangles cover no pixel
     cell, local, p = cell[flat], local[flat], p[flat]
-    if spacing is None:
-        spacing = float(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).mean())
+    mean_edge = float(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2).mean())
+    spacing = mean_edge if spacing is None else spacing
     lo, hi = p.min(axis=(0, 1)), p.max(axis=(0, 1))
+    with np.errstate(over="ignore"):
+        check_raster_memory(np.ceil((hi - lo) / spacing) + 1, hi - lo, spacing, mean_edge, ranks_on_node)
     first = np.floor(lo / spacing + 1e-9) * spacing
     count = np.maximum(np.ceil((hi - first) / spacing - 1e-9).astype(np.int64), 1)
     x = first[0] + spacing * (np.arange(count[0]) + 0.5)

@@ -53,6 +53,8 @@ class RunSummary:
         for term in m.equations.terms:
             summary.update(term.summary(last, m.mesh))
         summary.update(summary_maxima(last, m.settings.hazard_strain_threshold))
+        if m.scene.warnings:
+            summary["warnings"] = list(m.scene.warnings)
         if stop is not None:
             summary["stop_signal"] = stop
         if m.scene.restart_dir:

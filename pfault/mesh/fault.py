@@ -188,6 +188,13 @@ def _two_cells(T, nv, tris, fault_id, names):
     if np.any(cnt != 2):
         bad = cnt != 2
         nb, nz = int(np.sum(cnt == 1)), int(np.sum(cnt == 0))
+        outer = [i for i in np.unique(fault_id[bad]) if np.all(cnt[fault_id == i] == 1)]
+        if outer:
+            name = names[outer[0]]
+            raise InputError(f"fault '{name}': it lies on the outer boundary of the mesh (each of its "
+                             f"{int(np.sum(fault_id == outer[0]))} triangles has a tetrahedron on one side only); a "
+                             "fault must be an interior surface, with the body on both sides: remove it from "
+                             f"-pfault_faults (an outer surface takes boundary conditions, -pfault_bc_{name}_type)")
         raise InputError(_fault_message(names, fault_id[bad], f"{int(bad.sum())} triangles are not shared by two "
                                         f"tetrahedra ({nb} on the outer boundary, {nz} not faces of the mesh); "
                                         "embed the fault surface in the volume mesh (gmsh: mesh.embed / fragment)"))

@@ -168,7 +168,7 @@ CASES = [
          "-pfault_mesh_file: no such file 'nowhere.msh'"),
     # material properties from spatial fields (pfault.properties): checked before anything is written
     Case("field_with_nans", field_scene("young_modulus", "z,E [MPa]\n-100,10\n-50,nan\n0,10\n"), 1,
-         "field.csv: 1 of 3 E are NaN or infinite; fill them (or remove those points) and run again"),
+         "field.csv: 1 of 3 E are NaN or infinite (line 3); fill them (or remove those points) and run again"),
     Case("field_negative_modulus", field_scene("young_modulus", "z,E [MPa]\n-100,10\n0,-10\n"), 1,
          "field.csv: 1 values are not positive (e.g. -1e+07); fix the file's values"),
     Case("field_poisson_ratio_one_half", field_scene("poisson_ratio", "z,nu\n-100,0.3\n0,0.5\n"), 1,
@@ -199,8 +199,13 @@ CASES = [
     Case("station_file_missing", scene("-pfault_stations", "no_such_stations.csv"), 1,
          "-pfault_stations no_such_stations.csv: no such file; give a CSV file whose first line names the columns"),
     Case("los_not_a_unit_vector", scene("-pfault_insar_los", "1,0,1"), 1,
-         "-pfault_insar_los 1,0,1: not a unit vector (length 1.414); give the east, north, up components of the unit "
-         "vector from the ground to the satellite"),
+         "-pfault_insar_los 1,0,1: not a unit vector (length 1.414; rounded direction cosines are within 0.01 of 1 "
+         "and pfault normalises them); give the east, north, up components of the unit vector from the ground to the "
+         "satellite"),
+    Case("insar_raster_beyond_memory", scene("-pfault_box_size", "2000,2000,100", "-pfault_insar_los", "0,0,1",
+                                             "-pfault_insar_spacing", "1*mm"), 5,
+         "-pfault_insar_spacing 0.001 m: the raster over the land surface (2000 x 2000 m) would have 4e+12 pixels "
+         "(2e+06 x 2e+06) and need about "),
     Case("insar_spacing_not_positive", scene("-pfault_insar_los", "0,0,1", "-pfault_insar_spacing", "0"), 1,
          "-pfault_insar_spacing 0: the pixel size must be positive (m)"),
     # boundary conditions that do not hold the body: exit 1, found from the constraints before any solve
@@ -213,6 +218,10 @@ CASES = [
     Case("fault_scene_pulled_loose", lambda tmp, out, ranks: [
         "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_bc_xmin_type",
         "traction"], 1, "free to translate along x and to rotate about y"),
+    Case("fault_on_the_outer_boundary_with_bcs", scene("-pfault_faults", "xmax"), 1,
+         "-pfault_faults: 'xmax' is a fault and has boundary conditions (-pfault_bc_xmax_type); a fault must be an "
+         "interior surface of the mesh, boundary conditions act on its outer boundary: remove 'xmax' from "
+         "-pfault_faults or remove its -pfault_bc_xmax_* options"),
     Case("negative_tensile_strength", lambda tmp, out, ranks: [
         "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_fault_fault_tensile_strength",
         "-50*kPa"], 1, "-pfault_fault_fault_tensile_strength: must not be negative (0: a pre-existing fault)"),
@@ -377,6 +386,31 @@ def test_duplicate_option_in_one_file_warns(tmp_path, ranks):
                         "used is '3'"]
     with open(tmp_path / "out" / "summary.json") as fh:
         assert len(json.load(fh)["steps"]) == 3
+
+
+def test_input_warnings_are_printed_once_and_kept(tmp_path):
+    """The oedometer's table in bare seconds (0:0,10:-0.1*MPa) under a run of 10*year, and a modulus map whose grid
+    misses a node, on 2 ranks: each warning printed once, both in summary.json; the run completes with the whole
+    load at the first step (the analytic settlement 0.83333 m at every step; the map is 10 MPa everywhere)."""
+    field = write(tmp_path / "map.csv", "x,y,E [MPa]\n0,0,10\n10,0,10\n0,10,10\n10,10,10\n5,0,10\n5,10,10\n"
+                                        "0,5,10\n10,5,10\n")                   # a 3 x 3 grid without (5, 5)
+    out = tmp_path / "out"
+    code, _, stderr = run_pfault(["-m", "pfault", OED, "-pfault_output_dir", str(out), "-pfault_time_end", "10*year",
+                                  "-pfault_time_steps", "2", "-pfault_figures", "false",
+                                  "-pfault_material_soil_young_modulus", f"field:{field}"], 2)
+    assert code == 0, stderr
+    warnings = [line for line in stderr.splitlines() if line.startswith("pfault: warning")]
+    assert warnings == [
+        "pfault: warning: -pfault_material_soil_pressure_change: the table ends at t = 10 s, before the run's first "
+        "step (t = 5 year): every step takes its last value and the run sees none of its changes; its times have no "
+        "unit, so they are seconds: give them in the run's unit (e.g. 10*year)",
+        f"pfault: warning: -pfault_material_soil_young_modulus field:{field}: the 8 points lie on the 3 x 3 grid of "
+        "their distinct x, y values but leave 1 of its nodes empty (e.g. x = 5, y = 5); they are read as scattered "
+        "points (linear between neighbouring points), not as a grid; give every node of the grid once for "
+        "(multi)linear interpolation on it"], stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["warnings"] == warnings
+    assert [r["max_subsidence_m"] for r in summary["steps"]] == pytest.approx([0.8333333333] * 2, rel=1e-9)
 
 
 def test_command_line_override_and_duplicates(tmp_path):

@@ -216,9 +216,18 @@ def test_errors():
     """(c) Boundary triangles, unknown names and crossing faults are input errors naming the fault."""
     n = 4
     mesh = unit_box(n)
-    mesh.surfaces["wall"] = mesh.surfaces["top"][:3]
-    with pytest.raises(InputError, match=r"fault 'wall': 3 triangles are not shared by two tetrahedra.*embed"):
+    mesh.surfaces["wall"] = mesh.surfaces["top"][:3]           # wholly on the outer boundary: not a fault
+    with pytest.raises(InputError) as err:
         split_faults(mesh, ["wall"])
+    assert str(err.value) == ("fault 'wall': it lies on the outer boundary of the mesh (each of its 3 triangles has a "
+                              "tetrahedron on one side only); a fault must be an interior surface, with the body on "
+                              "both sides: remove it from -pfault_faults (an outer surface takes boundary conditions, "
+                              "-pfault_bc_wall_type)")
+    inside = add_fault(mesh, n, 0, 2, name="inside")
+    mesh.surfaces["part"] = np.vstack([inside, mesh.surfaces["top"][:3]])    # an interior plane and 3 outer faces
+    with pytest.raises(InputError, match=r"fault 'part': 3 triangles are not shared by two tetrahedra \(3 on the "
+                                         r"outer boundary, 0 not faces of the mesh\); embed"):
+        split_faults(mesh, ["part"])
     with pytest.raises(InputError, match=r"fault 'nope' is not a physical surface of the mesh \(surfaces: .*top"):
         split_faults(mesh, ["nope"])
     add_fault(mesh, n, 0, 2, name="fx")

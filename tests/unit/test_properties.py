@@ -138,25 +138,167 @@ def test_outside_is_an_error_unless_nearest(tmp_path):
             assert values[beyond] == pytest.approx(expect, rel=1e-14)
 
 
-@pytest.mark.parametrize("text, prop, message", [
-    ("x,y,E\n0,0,1e6\n1,0,nan\n0,1,1e6\n1,1,1e6\n", "young_modulus", "1 of 4 E are NaN or infinite; fill them"),
-    ("x,y,E\n0,0,1e6\n1,0,-2e6\n0,1,1e6\n1,1,1e6\n", "young_modulus", "1 values are not positive (e.g. -2e+06)"),
-    ("z,nu\n-10,0.3\n0,0.5\n", "poisson_ratio", "1 values are not in (-1, 0.5) (e.g. 0.5)"),
-    ("x,y,E [m]\n0,0,1\n1,0,1\n0,1,1\n1,1,1\n", "young_modulus", "'E' is in m, a length, but the option takes a "
-     "pressure in Pa"),
-    ("x,y,E [psi]\n0,0,1\n1,0,1\n0,1,1\n1,1,1\n", "young_modulus", "unknown unit 'psi' of 'E'"),
-    ("x,y,E,F\n0,0,1,1\n1,0,1,1\n0,1,1,1\n1,1,1,1\n", "young_modulus", "2 candidate variables (E, F); name one "
-     "with ,variable=NAME"),
-    ("a,b,E\n0,0,1\n", "young_modulus", "no coordinate named x, y or z"),
-    ("z,E\n0,1\n0,2\n", "young_modulus", "z = 0 appears more than once"),
-])
+GRID_2X2 = "0,0,1e6\n1,0,1e6\n0,1,1e6\n1,1,1e6\n"
+
+# each bad CSV file and the message after its "-OPTION field:PATH": the cause (with the line) and the fix
+BAD_CSV = [
+    ("x,y,E\n0,0,1e6\n1,0,nan\n0,1,1e6\n1,1,1e6\n", "young_modulus",
+     ": 1 of 4 E are NaN or infinite (line 3); fill them (or remove those points) and run again"),
+    ("x,y,E\n0,0,1e6\n1,0,inf\n0,1,-inf\n1,1,1e6\n", "young_modulus",
+     ": 2 of 4 E are NaN or infinite (lines 3, 4); fill them (or remove those points) and run again"),
+    ("x,y,E\n0,0,1e6\nnan,0,1e6\n0,1,1e6\n1,1,1e6\n", "young_modulus",
+     ": 1 of 4 x coordinates are NaN or infinite (line 3); fill them (or remove those points) and run again"),
+    ("x,y,E\n0,0,1e6\n1,0,-2e6\n0,1,1e6\n1,1,1e6\n", "young_modulus",
+     ": 1 values are not positive (e.g. -2e+06); fix the file's values (in the option's unit unless the file states "
+     "its own)"),
+    ("z,nu\n-10,0.3\n0,0.5\n", "poisson_ratio", ": 1 values are not in (-1, 0.5) (e.g. 0.5); fix the file's values "
+     "(in the option's unit unless the file states its own)"),
+    ("x,y,E [m]\n" + GRID_2X2, "young_modulus", ": 'E' is in m, a length, but the option takes a pressure in Pa; give "
+     "the variable in that unit"),
+    ("x,y,E [psi]\n" + GRID_2X2, "young_modulus", ": unknown unit 'psi' of 'E'; give a unit such as Pa (pressure)"),
+    ("x,y,E,F\n0,0,1,1\n1,0,1,1\n0,1,1,1\n1,1,1,1\n", "young_modulus", ": 2 candidate variables (E, F); name one "
+     "with ,variable=NAME after the path"),
+    # the columns: named, unknown, only coordinates, twice, not separated by commas, no header
+    ("a,b,E\n0,0,1\n", "young_modulus", ": no coordinate named x, y or z (its columns: a, b, E); name the coordinate "
+     "columns x, y and/or z (m, site coordinates)"),
+    ("x,y\n0,0\n1,0\n0,1\n1,1\n", "young_modulus", ": the file has only coordinate columns (x, y) and no value; add "
+     "the value's column (e.g. x,y,young_modulus [unit])"),
+    ("x,x,E\n0,0,1\n1,1,2\n", "young_modulus", ": column 'x' is named twice in the header (columns 1 and 2); name "
+     "each column once"),
+    ("x;y;E\n0;0;1\n", "young_modulus", ": the header line 'x;y;E' is one column; separate the columns with commas"),
+    ("0,0,1\n1,0,2\n", "young_modulus", ": the first line (0, 0, 1) is numbers, not a header; add a line naming the "
+     "columns first, e.g. x,y,value [unit]"),
+    ("# only a header\nx,y,E\n", "young_modulus", ": needs a header line (x,y,value ...) and at least one line of "
+     "values"),
+    # a line missing its value, an empty value, a word, one value too many (line numbers count comments)
+    ("# map\nx,y,E\n0,0,1\n1,0\n0,1,1\n1,1,1\n", "young_modulus", " line 4: no value for E (the line has 2 of the 3 "
+     "columns x, y, E); give a number in every column or remove the line"),
+    ("x,y,E\n0,0,1\n1,0,\n0,1,1\n1,1,1\n", "young_modulus", " line 3: no value for E (the line has 2 of the 3 "
+     "columns x, y, E); give a number in every column or remove the line"),
+    ("x,y,E\n0,0,1\n1,,1\n0,1,1\n1,1,1\n", "young_modulus", " line 3: no value for y; give a number in every column "
+     "or remove the line"),
+    ("x,y,E\n0,0,1\n1,0,soft\n0,1,1\n1,1,1\n", "young_modulus", " line 3: E is 'soft', not a number; give a number "
+     "in every column or remove the line"),
+    ("x,y,E\n0,0,1,7\n1,0,1\n0,1,1\n1,1,1\n", "young_modulus", " line 2: 4 values, but the header names 3 columns "
+     "(x, y, E); give one value per column"),
+    # a point given twice, with the same or another value, in 1, 2 and 3 dimensions (a grid, or not)
+    ("z,E\n0,1\n0,2\n-1,1\n", "young_modulus", ": the point z = 0 is given twice (lines 2 and 3) with different "
+     "values of E (1 and 2); give each point once (remove the extra lines)"),
+    ("x,y,E\n0,0,1\n1,0,2\n0,1,3\n1,1,4\n1,1,5\n", "young_modulus", ": the point x = 1, y = 1 is given twice (lines "
+     "5 and 6) with different values of E (4 and 5); give each point once (remove the extra lines)"),
+    ("x,y,E\n0,0,1\n1,0,2\n0,1,3\n1,1,4\n1,1,4\n0,0,1\n", "young_modulus", ": the point x = 0, y = 0 is given twice "
+     "(lines 2 and 7) with the same value; 1 more point is given more than once; give each point once (remove the "
+     "extra lines)"),
+    ("x,y,z,E\n" + "".join(f"{i},{j},{k},1\n" for i in (0, 1) for j in (0, 1) for k in (0, 1)) + "1,0,1,1\n1,0,1,2\n",
+     "young_modulus", ": the point x = 1, y = 0, z = 1 is given 3 times (lines 7, 10 and 11) with different values "
+     "of E (1, 1 and 2); give each point once (remove the extra lines)"),
+    # too few points
+    ("x,y,E\n5,5,1e6\n", "young_modulus", ": one point (line 2); a field in x, y needs at least 3 points not on one "
+     "line: give more points, or the property as a number instead of field:"),
+    ("x,y,E\n0,0,1\n1,0,2\n2,0,3\n", "young_modulus", ": the grid has one y value; give at least two, or leave y out "
+     "of the file for a field that does not vary with y"),
+]
+
+
+@pytest.mark.parametrize("text, prop, message", BAD_CSV)
 def test_bad_files(tmp_path, text, prop, message):
     path = tmp_path / "f.csv"
     path.write_text(text)
     option = f"pfault_material_clay_{prop}"
     with pytest.raises(InputError) as err:
         pr.read_fields([pr.FieldRef(option, str(path), unit="Pa" if prop == "young_modulus" else "")], "")
-    assert message in str(err.value) and str(err.value).startswith(f"-{option} field:{path}")
+    assert str(err.value) == f"-{option} field:{path}{message}"
+
+
+def test_bad_hdf5_and_other_files(tmp_path):
+    """The HDF5 counterparts (a coordinate that repeats a value or goes back and forth, only coordinates, a point
+    twice among scattered points), a directory, a GeoTIFF and a binary file."""
+    def h5(name, **data):
+        with h5py.File(tmp_path / name, "w") as f:
+            for k, v in data.items():
+                f[k] = v
+        return str(tmp_path / name)
+
+    def message(path):
+        with pytest.raises(InputError) as err:
+            read_field(path, OPTION, "Pa")
+        assert str(err.value).startswith(f"-{OPTION} field:{path}: "), err.value
+        return str(err.value)[len(f"-{OPTION} field:{path}: "):]
+
+    e = np.ones((2, 3))
+    assert message(h5("rep.h5", x=[0.0, 100.0, 100.0], y=[0.0, 1.0], E=e)) == (
+        "the coordinate variable x gives x = 100 twice (indices 1 and 2); a grid gives each x once")
+    assert message(h5("order.h5", x=[0.0, 300.0, 100.0], y=[0.0, 1.0], E=e)) == (
+        "the coordinate variable x is not in order (x[1] = 300, x[2] = 100); sort it, increasing or decreasing, "
+        "with the values along it")
+    assert message(h5("coords.h5", x=[0.0, 1.0], y=[0.0, 1.0])) == (
+        "the file has only coordinate variables (x, y) and no value; add the value's variable (e.g. a variable "
+        "value with a units attribute)")
+    assert message(h5("pts.h5", x=[0.0, 1.0, 0.0, 1.0], y=[0.0, 0.0, 1.0, 0.0], E=[1.0, 2.0, 3.0, 4.0])) == (
+        "the point x = 1, y = 0 is given twice (entries 1 and 3) with different values of E (2 and 4); give each "
+        "point once (remove the extra entries)")
+    assert message(str(tmp_path)) == "is a directory; give the path of a CSV, HDF5 or NetCDF file in it"
+    (tmp_path / "map.tif").write_bytes(b"II*\x00" + bytes(100))
+    assert message(str(tmp_path / "map.tif")) == (
+        "a (Geo)TIFF, which pfault does not read; convert it to NetCDF (gdal_translate -of netCDF in.tif out.nc) "
+        "and give that file, with its units attribute")
+    (tmp_path / "map.bin").write_bytes(bytes(range(128, 256)))
+    assert message(str(tmp_path / "map.bin")) == (
+        "neither a text (CSV) file nor HDF5 or NetCDF; give a CSV file with a header line, or an HDF5 or NetCDF file")
+
+
+def test_north_up_grid_is_turned_round(tmp_path):
+    """A grid stored with y decreasing (north-up, as rasters are) gives the values of the same grid stored
+    increasing; a spreadsheet's byte-order mark and empty fields at the ends of lines are ignored."""
+    e = np.array([[MAP_E[i, j] for i in range(3)] for j in range(2)])        # (ny, nx) MPa
+    with h5py.File(tmp_path / "up.h5", "w") as h5:
+        h5["x"], h5["y"], h5["young_modulus"] = MAP_X, MAP_Y[::-1], e[::-1] * 1e6
+    with h5py.File(tmp_path / "up_x.h5", "w") as h5:
+        h5["x"], h5["y"], h5["young_modulus"] = MAP_X[::-1], MAP_Y, e[:, ::-1] * 1e6
+    pts = np.array([[50.0, 50.0, 0.0], [250.0, 150.0, 0.0], [100.0, 200.0, 0.0]])
+    expect = [7.25e6, 15.125e6, 12e6]                       # test_map_is_bilinear_by_hand
+    for name in ("up.h5", "up_x.h5"):
+        assert pr.interpolate(read_field(str(tmp_path / name), OPTION, "Pa"), pts)[0] == pytest.approx(expect,
+                                                                                                      rel=1e-14)
+    text = write_map_csv(tmp_path / "map.csv")
+    lines = open(text).read().splitlines()
+    (tmp_path / "excel.csv").write_text("\ufeff" + "".join(f"{ln},,\n" for ln in lines), encoding="utf-8")
+    field = read_field(str(tmp_path / "excel.csv"), OPTION, "Pa")
+    assert field.is_grid and pr.interpolate(field, pts)[0] == pytest.approx(expect, rel=1e-14)
+
+
+def test_points_that_look_like_a_grid_are_noted(tmp_path):
+    """Points filling most of the grid of their distinct coordinates, but not all of it (a node left out,
+    a coordinate off by round-off), are scattered points with a note saying why; a full grid and points
+    scattered at random have none."""
+    path = tmp_path / "f.csv"
+    nodes = [(x, y) for x in (0.0, 100.0, 200.0, 300.0) for y in (0.0, 100.0, 200.0)]
+
+    def read(pts):
+        path.write_text("x,y,E\n" + "".join(f"{x!r},{y!r},{1e6 + x + y}\n" for x, y in pts))
+        return read_field(str(path), OPTION, "Pa")
+
+    where = f"-{OPTION} field:{path}: "
+    tail = ("; they are read as scattered points (linear between neighbouring points), not as a grid; give every "
+            "node of the grid once for (multi)linear interpolation on it")
+    field = read(nodes[:-1])
+    assert not field.is_grid and field.note == (where + "the 11 points lie on the 4 x 3 grid of their distinct x, y "
+                                                "values but leave 1 of its nodes empty (e.g. x = 300, y = 200)" + tail)
+    jitter = [(x + (1e-5 if (x, y) == (100.0, 100.0) else 0.0), y) for x, y in nodes]
+    field = read(jitter)
+    assert not field.is_grid and field.note == (
+        where + "the 12 points lie on the 5 x 3 grid of their distinct x, y values but leave 3 of its nodes empty "
+        "(e.g. x = 100, y = 100), and x = 100 and 100.00001 differ by only 1e-05 m (round-off?)" + tail)
+    assert read(nodes).is_grid and read(nodes).note == ""
+    rng = np.random.default_rng(0)
+    field = read(rng.uniform(0, 1000, (30, 2)))
+    assert not field.is_grid and field.note == ""
+    notes = []
+    mesh = box_mesh((300.0, 200.0, 30.0), (3, 2, 1), materials=("clay",))
+    read(nodes[:-1])
+    mats = [Material("clay", ref(path, outside="nearest"), 0.3, 1.0, 2000.0)]
+    pr.serial_field_values(["clay"], pr.field_refs(mats), mesh.points, mesh.tets, mesh.cell_material, "", notes=notes)
+    assert notes == [read_field(str(path), OPTION, "Pa").note] and notes[0].startswith(where + "the 11 points")
 
 
 def test_wrong_variable_name_and_syntax(tmp_path):
