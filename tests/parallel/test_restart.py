@@ -129,7 +129,7 @@ def test_restart_reads_a_format_5_checkpoint_with_every_face_broken(tmp_path):
     run_scene(TWO_BLOCKS, ref, extra=_steps(("-ksp_atol", "0"), 2, "1"))
     run_scene(TWO_BLOCKS, part, extra=_steps(("-ksp_atol", "0"), 1, "0.5"))
     with h5py.File(part / "checkpoint.h5", "r+") as h5:
-        assert h5.attrs["format"] == 6 and h5["faults/broken"][()].all()
+        assert h5.attrs["format"] == 7 and h5["faults/broken"][()].all()
         assert np.isnan(h5["faults/break_time"][()]).all()
         h5.attrs["format"] = 5
         del h5["faults/broken"], h5["faults/break_time"]
@@ -139,6 +139,26 @@ def test_restart_reads_a_format_5_checkpoint_with_every_face_broken(tmp_path):
     assert f["faces_broken"] == f["faces"] and f["first_break_time_s"] is None
     with open(ref / "summary.json") as fh:
         s_ref = json.load(fh)
+    assert s_ref["max_fault_slip_m"] > 0.1
+    assert s["max_fault_slip_m"] == pytest.approx(s_ref["max_fault_slip_m"], rel=RTOL)
+
+
+def test_restart_reads_a_format_6_checkpoint(tmp_path):
+    """Format 6 also holds the faces' pore pressure and tractions (``faults/pn``, ``faults/traction``), which u and
+    the loads of the checkpoint's time give: a format-6 checkpoint with them (here made up, to show they are not
+    read) continues as the uninterrupted run does."""
+    import h5py
+    ref, part = tmp_path / "ref", tmp_path / "part"
+    run_scene(TWO_BLOCKS, ref, extra=_steps(("-ksp_atol", "0"), 2, "1"))
+    run_scene(TWO_BLOCKS, part, extra=_steps(("-ksp_atol", "0"), 1, "0.5"))
+    with h5py.File(part / "checkpoint.h5", "r+") as h5:
+        n = h5.attrs["fault_faces"]
+        h5.attrs["format"] = 6
+        h5["faults/pn"], h5["faults/traction"] = np.full(n, 1e9), np.full((n, 3), -1e9)
+    _, s = run_scene(TWO_BLOCKS, part, extra=[*_steps(("-ksp_atol", "0"), 2, "1"), "-pfault_restart", str(part)])
+    with open(ref / "summary.json") as fh:
+        s_ref = json.load(fh)
+    assert s["converged"] and s["completed_steps"] == [1, 2]
     assert s_ref["max_fault_slip_m"] > 0.1
     assert s["max_fault_slip_m"] == pytest.approx(s_ref["max_fault_slip_m"], rel=RTOL)
 
@@ -157,7 +177,7 @@ def test_restart_reads_a_format_4_checkpoint_without_faults_only(tmp_path):
     faulted = tmp_path / "faulted"
     run_scene(TWO_BLOCKS, faulted, extra=_steps((), 1, "0.5"))
     with h5py.File(faulted / "checkpoint.h5", "r+") as h5:
-        assert h5.attrs["format"] == 6 and h5["faults/slid"].shape == (h5.attrs["fault_faces"],)
+        assert h5.attrs["format"] == 7 and h5["faults/slid"].shape == (h5.attrs["fault_faces"],)
         h5.attrs["format"] = 4
         del h5["faults/slid"], h5["faults/broken"], h5["faults/break_time"]
     before = {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)}
@@ -166,7 +186,7 @@ def test_restart_reads_a_format_4_checkpoint_without_faults_only(tmp_path):
     assert proc.returncode == 1, proc.stderr
     assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
         f"pfault: error: -pfault_restart {faulted}: its checkpoint.h5 has format 4, written by another version of "
-        "pfault; this one reads formats 5 to 6 (continue that run with the pfault that wrote it, or run it again)"]
+        "pfault; this one reads formats 5 to 7 (continue that run with the pfault that wrote it, or run it again)"]
     assert {f: os.stat(faulted / f).st_mtime_ns for f in os.listdir(faulted)} == before
 
 
@@ -178,7 +198,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     part = tmp_path / "part"
     run_scene(opts, part, extra=_steps(extra, 2, half))
     with h5py.File(part / "checkpoint.h5", "r+") as h5:
-        assert h5.attrs["format"] == 6
+        assert h5.attrs["format"] == 7
         h5.attrs["format"] = 2
         h5["u/cell_ids"], h5["u/cell"] = np.zeros(0, np.int64), np.zeros((0, 0))
     before = {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)}
@@ -187,7 +207,7 @@ def test_restart_refuses_a_checkpoint_of_another_format(tmp_path):
     assert proc.returncode == 1, proc.stderr
     assert [line for line in proc.stderr.splitlines() if line.startswith("pfault:")] == [
         f"pfault: error: -pfault_restart {part}: its checkpoint.h5 has format 2, written by another version of "
-        "pfault; this one reads formats 5 to 6 (continue that run with the pfault that wrote it, or run it again)"]
+        "pfault; this one reads formats 5 to 7 (continue that run with the pfault that wrote it, or run it again)"]
     assert {f: os.stat(part / f).st_mtime_ns for f in os.listdir(part)} == before
 
 
