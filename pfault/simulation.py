@@ -19,6 +19,7 @@ from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLi
 from .model import Model, build_model
 from .options import OptionReader, check_unused_petsc_options
 from .solver.policy import StepSolver
+from .sources import coverage
 from .state import State
 
 
@@ -40,6 +41,8 @@ class Simulation:
         state = solver = None
         try:
             self.observations = Observations.locate(self.model, observed)
+            # what summary.json adds
+            self.notes = {"pore_pressure": self._coverage()}
             state, solver = self._state_and_solver(self.model)
             # the records, grid index and step offset of the run a restart continues (None: a new run)
             self.resumed = self._restart(state) if self.model.scene.restart_dir else None
@@ -54,6 +57,7 @@ class Simulation:
         restart_step = None if self.resumed is None else self.resumed[1] + self.resumed[2]
         self.output = RunOutput(self.model, state, self.argv, self.model.scene.restart_dir, restart_step)
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
+        self.composer.extra.update(self.notes)
 
     @property
     def settings(self) -> Any:
@@ -111,6 +115,14 @@ class Simulation:
         self.output.open()
         stage.pop()
         self.wall["output"] += time.perf_counter() - t0
+
+    def _coverage(self) -> dict:
+        """The cells the pore-pressure source leaves unloaded (pfault.sources.coverage), said once; summary.json's
+        ``pore_pressure``."""
+        cov = coverage.measure(self.comm, self.model.source, self.model.assembler.vol, self.settings.time_end)
+        if cov.line():
+            PETSc.Sys.Print(cov.line())
+        return cov.summary()
 
     def _restart(self, state: State) -> tuple[list, int, int]:
         """Restore ``state`` from the checkpoint of the run in -pfault_restart: returns its step records, the
