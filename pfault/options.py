@@ -186,6 +186,11 @@ SPECS = [
        "checkpoint.h5), up to -pfault_time_end; the checkpoint's time must be a point of the time grid "
        "-pfault_time_end and -pfault_time_steps give; writes into that directory unless -pfault_output_dir "
        "is given"),
+    _s("pfault_restart_changed_inputs", "names", "", "", "with -pfault_restart: options whose data files may differ "
+       "from those the continued run read (its checkpoint.h5 records each file's size and SHA-256), e.g. "
+       "pfault_heads_file for a head file a longer model run extended: the continued steps read the files as they "
+       "are now, the steps up to the checkpoint stay those of the old files, and summary.json lists them "
+       "(restart.changed_inputs); without it a changed data file is an error"),
     # output: observations
     _s("pfault_stations", "string", "", "", "CSV file of stations, header name,x,y,z[,side] (site coordinates, m; "
        "side plus|minus: the side a station on a fault takes, default minus): their displacement at time 0 and after "

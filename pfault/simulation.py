@@ -12,6 +12,7 @@ from petsc4py import PETSc
 from . import run as loop
 from .effects import EffectCosts
 from .errors import InputError
+from .io import provenance
 from .io.observations import Observations, read_observation_settings
 from .io.summary import RunSummary
 from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLine, RunOutput, SummaryObserver,
@@ -34,18 +35,22 @@ class Simulation:
         self.comm = PETSc.COMM_WORLD
         self.reader = OptionReader(PETSc)
         self.costs = EffectCosts(self.comm)
-        observed = read_observation_settings(self.reader, options_file)    # before build_model checks the options
+        # before build_model checks the options
+        observed = read_observation_settings(self.reader, options_file)
+        changed_inputs = provenance.read_changed_inputs(self.reader)
         self.model: Model = build_model(self.comm, self.reader, options_file)
         self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "output": 0.0, **self.model.wall}
         self.times = np.linspace(0.0, self.settings.time_end, self.settings.time_steps + 1)
         state = solver = None
         try:
             self.observations = Observations.locate(self.model, observed)
-            # what summary.json adds
+            # the data files read, by size and SHA-256 (input_files.json, checkpoint.h5); what summary.json adds
+            self.inputs = provenance.record(self.comm, provenance.scene_files(self.model.scene,
+                                                                              observed.stations_file, options_file))
             self.notes = {"pore_pressure": self._coverage()}
             state, solver = self._state_and_solver(self.model)
             # the records, grid index and step offset of the run a restart continues (None: a new run)
-            self.resumed = self._restart(state) if self.model.scene.restart_dir else None
+            self.resumed = self._restart(state, changed_inputs) if self.model.scene.restart_dir else None
         except BaseException:
             # every rank at once (the errors here are every rank's), as pfault.model.build_model does
             for part in (solver, state, self.model):
@@ -55,7 +60,8 @@ class Simulation:
         self.state: State = state
         self.solver: StepSolver = solver
         restart_step = None if self.resumed is None else self.resumed[1] + self.resumed[2]
-        self.output = RunOutput(self.model, state, self.argv, self.model.scene.restart_dir, restart_step)
+        self.output = RunOutput(self.model, state, self.argv, self.model.scene.restart_dir, restart_step,
+                                metadata={provenance.DATASET: self.inputs})
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
         self.composer.extra.update(self.notes)
 
@@ -124,13 +130,16 @@ class Simulation:
             PETSc.Sys.Print(cov.line())
         return cov.summary()
 
-    def _restart(self, state: State) -> tuple[list, int, int]:
-        """Restore ``state`` from the checkpoint of the run in -pfault_restart: returns its step records, the
-        grid index of its time and its step number minus that index."""
+    def _restart(self, state: State, changed_inputs: tuple = ()) -> tuple[list, int, int]:
+        """Restore ``state`` from the checkpoint of the run in -pfault_restart and check that this run's data files are
+        that run's (or named in ``changed_inputs``): returns its step records, the grid index of its time and its step
+        number minus that index."""
         from .io import checkpoint
         times = self.times
         restart_dir = self.model.scene.restart_dir
         attrs, records = checkpoint.load(self.comm, restart_dir, self.model, state)
+        self.notes["restart"] = provenance.check_restart(self.comm, restart_dir, checkpoint.NAME, self.inputs,
+                                                         changed_inputs)
         step, t = int(attrs["step"]), float(attrs["time_s"])
         index = int(np.argmin(np.abs(times - t)))
         if abs(times[index] - t) > 1e-9 * times[-1]:

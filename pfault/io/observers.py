@@ -5,6 +5,7 @@ put in place after the first completed step, so that a run that fails before it 
 from __future__ import annotations
 
 import errno
+import json
 import shutil
 from contextlib import nullcontext
 from typing import Any
@@ -86,8 +87,10 @@ class RunOutput:
     collective unless it says otherwise."""
 
     def __init__(self, model: Any, state: Any, argv: list, restart_dir: str | None = None,
-                 restart_step: int | None = None) -> None:
+                 restart_step: int | None = None, metadata: dict | None = None) -> None:
         self.model, self.state, self.argv = model, state, list(argv)
+        # {name: JSON value} written as NAME.json beside options.txt and into every checkpoint (the data files read)
+        self.metadata = dict(metadata or {})
         self.comm = model.comm
         self.restart_dir, self.restart_step = restart_dir, restart_step
         self.writer: Any = None             # rank 0, once open (a RunWriter)
@@ -117,7 +120,8 @@ class RunOutput:
         faces = None if m.faults is None else m.faults.faces.face
         self.checkpoint = checkpoint.Writer(self.comm, m.mesh, faces=faces,
                                             n_faces=0 if m.faults is None else len(m.fault_id),
-                                            parallel_io=parallel)
+                                            parallel_io=parallel,
+                                            texts={k: json.dumps(v).encode() for k, v in self.metadata.items()})
         if not self.restart_dir:
             self.write_fields(0, 0.0, np.zeros(m.dofmap.n_local), initial=True)
 
@@ -159,7 +163,7 @@ class RunOutput:
                                                                         m.split.fault_id),
                                surface_mesh=None if self.surface is None else (self.surface.points,
                                                                                self.surface.triangles))
-            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv, self.metadata)
             if self.restart_dir:
                 writer.continue_from(self.restart_dir, int(self.restart_step or 0))
         except ValueError as exc:       # the series of the run it continues are of another mesh

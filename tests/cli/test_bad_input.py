@@ -335,8 +335,9 @@ def test_failure_on_one_rank_alone_is_recorded_and_continued(tmp_path):
     assert summary["converged"] and not summary["interrupted"] and summary["ranks"] == 2
     assert summary["completed_steps"] == [1, 2] and [r["step"] for r in summary["steps"]] == [1, 2]
     assert summary["max_subsidence_m"] == pytest.approx(0.8333333333 / 5, rel=1e-9)
-    assert sorted(os.listdir(out)) == ["checkpoint.h5", "fields.h5", "fields.xdmf", "materials.json", "options.txt",
-                                       "summary.json", "surface.h5", "surface.xdmf", "versions.json"]
+    assert sorted(os.listdir(out)) == ["checkpoint.h5", "fields.h5", "fields.xdmf", "input_files.json",
+                                       "materials.json", "options.txt", "summary.json", "surface.h5", "surface.xdmf",
+                                       "versions.json"]
     assert sorted(os.listdir(tmp_path)) == ["out"]
     code, _, stderr = run_pfault(["-m", "pfault", OED, "-pfault_restart", str(out), "-pfault_figures", "false"], 2)
     assert code == 0, stderr[-3000:]
