@@ -93,6 +93,9 @@ class Model:
 
 
 def _check_restart_dir(path: str) -> None:
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise InputError(f"-pfault_restart {path}: is a file, not a run directory; give the output directory of "
+                         "the run to continue (the directory that holds its checkpoint.h5)")
     if not os.path.isdir(path):
         raise InputError(f"-pfault_restart {path}: no such run directory")
 
@@ -204,7 +207,7 @@ def _source(scene: Scene, mesh: Any, props: Any, field_values: dict | None) -> A
     if scene.heads_settings is not None:
         with logged("pfaultHeadsRead"):
             centroids = mesh.coords[mesh.cells].mean(axis=1)
-            return build_heads_source(mesh.dm.getComm(), scene.heads_settings, centroids)
+            return build_heads_source(mesh.dm.getComm(), scene.heads_settings, centroids, scene.settings.time_end)
     if scene.flow_settings is None:
         return TableSource(scene.drawdown, mesh.cell_material)
     from .solver.flow import FIXED_HEAD_BIT, GroundwaterFlow

@@ -169,10 +169,12 @@ SPECS = [
     _s("pfault_heads_length_unit", "quantity", 1.0, "m", "length unit of the MODFLOW model (its grid and heads): "
        "1 for metres, 0.3048 for feet"),
     _s("pfault_heads_reference_time", "quantity", None, "s", "saved time of -pfault_heads_file whose heads are "
-       "h_ref, the state pfault's initial state stands for (default: the first saved time)"),
+       "h_ref, the state pfault's initial state stands for (default: the first saved time, with a warning when it is "
+       "after the run's time 0: give this option to say those heads are the state at rest)"),
     _s("pfault_heads_outside", "choice", "error", "", "mesh cells whose centroid is outside the groundwater model "
        "(beyond its extent, above its top, below its bottom, or in an inactive cell): error, or zero (no "
-       "pore-pressure change there)", choices=("error", "zero")),
+       "pore-pressure change there; the run says how many cells and what share of the volume, and stops if that is "
+       "every cell)", choices=("error", "zero")),
     _s("pfault_mesh_origin", "list", "0,0,0", "m", "site coordinates of the mesh's origin: site = mesh + origin "
        "(the coordinates of the groundwater model and of other site data)"),
     # time
@@ -186,6 +188,11 @@ SPECS = [
        "checkpoint.h5), up to -pfault_time_end; the checkpoint's time must be a point of the time grid "
        "-pfault_time_end and -pfault_time_steps give; writes into that directory unless -pfault_output_dir "
        "is given"),
+    _s("pfault_restart_changed_inputs", "names", "", "", "with -pfault_restart: options whose data files may differ "
+       "from those the continued run read (its checkpoint.h5 records each file's size and SHA-256), e.g. "
+       "pfault_heads_file for a head file a longer model run extended: the continued steps read the files as they "
+       "are now, the steps up to the checkpoint stay those of the old files, and summary.json lists them "
+       "(restart.changed_inputs); without it a changed data file is an error"),
     # output: observations
     _s("pfault_stations", "string", "", "", "CSV file of stations, header name,x,y,z[,side] (site coordinates, m; "
        "side plus|minus: the side a station on a fault takes, default minus): their displacement at time 0 and after "

@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass
 
 from pfault.errors import EXIT_INPUT
+from pfault.paths import file_problem
 
 COMMAND_LINE = "the command line"
 
@@ -98,9 +99,12 @@ def _entry_or_include(token, value, source, line, included_by):
     if value is None:
         raise ArgumentError(f"{where}: -options_file needs a file name", EXIT_INPUT)
     path = included_path(value, source if line else None)
-    if not os.path.isfile(path):
+    problem = file_problem(path)
+    if problem == "no such file":
         raise ArgumentError(f"{where}: -options_file {value}: no such file{_where_looked(value, source, line)}",
                             EXIT_INPUT)
+    if problem:
+        raise ArgumentError(f"{where}: -options_file {value}: {problem}; give a PETSc options file", EXIT_INPUT)
     return read_options_file(path, included_by + ((source,) if line else ()))
 
 

@@ -12,6 +12,7 @@ from petsc4py import PETSc
 from . import run as loop
 from .effects import EffectCosts
 from .errors import InputError
+from .io import provenance
 from .io.observations import Observations, read_observation_settings
 from .io.summary import RunSummary
 from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLine, RunOutput, SummaryObserver,
@@ -20,6 +21,7 @@ from .model import Model, build_model
 from .options import OptionReader, check_unused_petsc_options
 from .io import checkpoint
 from .solver.policy import StepSolver
+from .sources import coverage
 from .state import State
 from .surface import LandSurface
 
@@ -35,16 +37,22 @@ class Simulation:
         self.comm = PETSc.COMM_WORLD
         self.reader = OptionReader(PETSc)
         self.costs = EffectCosts(self.comm)
-        observed = read_observation_settings(self.reader, options_file)    # before build_model checks the options
+        # before build_model checks the options
+        observed = read_observation_settings(self.reader, options_file)
+        changed_inputs = provenance.read_changed_inputs(self.reader)
         self.model: Model = build_model(self.comm, self.reader, options_file)
         self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "output": 0.0, **self.model.wall}
         self.times = np.linspace(0.0, self.settings.time_end, self.settings.time_steps + 1)
         state = solver = None
         try:
             self.observations = Observations.locate(self.model, observed)
+            # the data files read, by size and SHA-256 (input_files.json, checkpoint.h5); what summary.json adds
+            self.inputs = provenance.record(self.comm, provenance.scene_files(self.model.scene,
+                                                                              observed.stations_file, options_file))
+            self.notes = {"pore_pressure": self._coverage()}
             state, solver = self._state_and_solver(self.model)
             # the records, grid index and step offset of the run a restart continues (None: a new run)
-            self.resumed = self._restart(state) if self.model.scene.restart_dir else None
+            self.resumed = self._restart(state, changed_inputs) if self.model.scene.restart_dir else None
         except BaseException:
             # every rank at once (the errors here are every rank's), as pfault.model.build_model does
             for part in (solver, state, self.model):
@@ -57,8 +65,9 @@ class Simulation:
         self.surface = LandSurface(self.model)
         self.stepper = loop.Stepper(self.model, state, solver, self.surface)
         self.output = RunOutput(self.model, state, self.argv, self.surface, self.model.scene.restart_dir,
-                                restart_step)
+                                restart_step, metadata={provenance.DATASET: self.inputs})
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
+        self.composer.extra.update(self.notes)
 
     @property
     def settings(self) -> Any:
@@ -130,12 +139,23 @@ class Simulation:
         stage.pop()
         self.wall["output"] += time.perf_counter() - t0
 
-    def _restart(self, state: State) -> tuple[list, int, int]:
-        """Restore ``state`` from the checkpoint of the run in -pfault_restart: returns its step records, the
-        grid index of its time and its step number minus that index."""
+    def _coverage(self) -> dict:
+        """The cells the pore-pressure source leaves unloaded (pfault.sources.coverage), said once; summary.json's
+        ``pore_pressure``."""
+        cov = coverage.measure(self.comm, self.model.source, self.model.assembler.vol, self.settings.time_end)
+        if cov.line():
+            PETSc.Sys.Print(cov.line())
+        return cov.summary()
+
+    def _restart(self, state: State, changed_inputs: tuple = ()) -> tuple[list, int, int]:
+        """Restore ``state`` from the checkpoint of the run in -pfault_restart and check that this run's data files are
+        that run's (or named in ``changed_inputs``): returns its step records, the grid index of its time and its step
+        number minus that index."""
         times = self.times
         restart_dir = self.model.scene.restart_dir
         attrs, records = checkpoint.load(self.comm, restart_dir, self.model, state)
+        self.notes["restart"] = provenance.check_restart(self.comm, restart_dir, checkpoint.NAME, self.inputs,
+                                                         changed_inputs)
         step, t = int(attrs["step"]), float(attrs["time_s"])
         index = int(np.argmin(np.abs(times - t)))
         if abs(times[index] - t) > 1e-9 * times[-1]:

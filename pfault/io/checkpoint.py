@@ -42,6 +42,9 @@ Contents (datasets; attributes on the root)
   ``flow_time``
 - ``steps``: the run's step records up to the checkpoint's step (JSON as bytes), those of summary.json: a run
   killed between its checkpoint and its summary continues from the checkpoint with its records
+- ``input_files``: the data files the run read, each with its size and SHA-256 (JSON as bytes,
+  pfault.io.provenance), which a restart compares with its own; absent from checkpoints of earlier versions of
+  format 6 and before (their files are not checked)
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``
 
@@ -143,9 +146,10 @@ class Writer:
     faults). Every method is collective."""
 
     def __init__(self, comm: Any, mesh: LocalMesh, faces: np.ndarray, n_faces: int = 0,
-                 parallel_io: bool = False) -> None:
+                 parallel_io: bool = False, texts: dict[str, bytes] | None = None) -> None:
         self.mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
         self.mesh, self.parallel = mesh, bool(parallel_io)
+        self.texts = dict(texts or {})      # JSON datasets written into every checkpoint (the run's data files)
         self.faces = np.asarray(faces, dtype=np.int64)
         self.n_faces = int(n_faces)
         if not self.parallel:
@@ -162,6 +166,7 @@ class Writer:
         """The checkpoint of ``state`` after step ``step`` at time t, with the run's step records up to it, into
         ``directory`` (known to every rank)."""
         data, attrs, texts = local_state(model, state, step, t, records)
+        texts.update(self.texts)
         path = os.path.join(directory, NAME)
         if self.parallel:
             self._write_parallel(path, data, attrs, texts)

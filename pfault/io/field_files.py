@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..paths import file_problem
 from ..units import DIMENSION_NAMES, UNITS, dimension
 
 AXES = ("x", "y", "z")
@@ -65,10 +66,9 @@ def read_field(path: str, option: str, unit: str, variable: str = "", default_va
     """The field in ``path`` for the option ``option`` (declared in ``unit``). ``variable``: the value's name
     given by the user; ``default_variable``: the name tried when the file has several candidates."""
     where = f"-{option} field:{path}"
-    if os.path.isdir(path):
-        raise InputError(f"{where}: is a directory; give the path of a CSV, HDF5 or NetCDF file in it")
-    if not os.path.isfile(path):
-        raise InputError(f"{where}: no such file; give the path of a CSV, HDF5 or NetCDF file")
+    problem = file_problem(path)
+    if problem:
+        raise InputError(f"{where}: {problem}; give the path of a CSV, HDF5 or NetCDF file")
     with open(path, "rb") as fh:
         magic = fh.read(8)
     if magic.startswith(b"\x89HDF"):

@@ -21,12 +21,41 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..paths import file_problem
 from ..sources import lookup
 
 
+# what to do about a head file that ends inside a record
+CUT_FIX = ("the copy or the model run that wrote it stopped before the end: copy the file again, or run the model to "
+           "its end")
+
+
+# what each file option takes, for the message of a path that names no readable file
+WANTED = {"pfault_heads_file": "give the head file the model saved (MODFLOW's HEAD FILEOUT, e.g. model.hds) or an "
+                               "HDF5/NetCDF file in the layout of README",
+          "pfault_heads_grid": "give the model's binary grid file (MODEL.dis.grb or MODEL.disv.grb)"}
+
+
+def starts_like_heads(path: str) -> bool:
+    """Whether the file begins with the header of a head record (KSTP, KPER, PERTIM, TOTIM, TEXT 'HEAD', NCOL,
+    NROW, ILAY, in double or single precision): a file that does and that flopy cannot index was cut short."""
+    with open(path, "rb") as fh:
+        start = fh.read(64)
+    for real in ("<f8", "<f4"):
+        dtype = np.dtype([("kstp", "<i4"), ("kper", "<i4"), ("pertim", real), ("totim", real), ("text", "S16"),
+                          ("ncol", "<i4"), ("nrow", "<i4"), ("ilay", "<i4")])
+        if len(start) < dtype.itemsize:
+            continue
+        h = np.frombuffer(start[:dtype.itemsize], dtype=dtype)[0]
+        if b"HEAD" in bytes(h["text"]).upper() and min(h["kstp"], h["kper"], h["ncol"], h["nrow"], h["ilay"]) >= 1:
+            return True
+    return False
+
+
 def _need(path: str, option: str) -> None:
-    if not os.path.isfile(path):
-        raise InputError(f"-{option} {path}: no such file")
+    problem = file_problem(path)
+    if problem:
+        raise InputError(f"-{option} {path}: {problem}; {WANTED[option]}")
 
 
 @dataclass(frozen=True)
@@ -58,10 +87,49 @@ class Mf6Grid:
         k = lookup.layer_of(self.top, self.botm, c2d, points[:, 2])
         return np.where(k >= 0, k * self.ncpl + c2d, -1)
 
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """The model's bounding box in site coordinates: (lo, hi), each x, y, z (for messages)."""
+        if self.kind == "DIS":
+            w, h = float(np.sum(self.delr)), float(np.sum(self.delc))
+            corners = np.array([[0.0, 0.0], [w, 0.0], [0.0, h], [w, h]])
+        else:
+            corners = self.vertices
+        a = np.deg2rad(self.angrot)
+        x = self.xorigin + corners[:, 0] * np.cos(a) - corners[:, 1] * np.sin(a)
+        y = self.yorigin + corners[:, 0] * np.sin(a) + corners[:, 1] * np.cos(a)
+        return (np.array([x.min(), y.min(), float(np.min(self.botm))]),
+                np.array([x.max(), y.max(), float(np.max(self.top))]))
+
+
+GRB_LINE = 50                   # the four header lines of a binary grid file: GRID, VERSION, NTXT, LENTXT
+GRB_BYTES = {"INTEGER": 4, "DOUBLE": 8}
+
+
+def grid_file_cut(path: str) -> str | None:
+    """How a MODFLOW 6 binary grid file is cut short, from its text header (the header, then each variable's
+    values), or None: it is whole, or it does not start like a grid file (flopy then says what it is not)."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        if not fh.read(GRB_LINE).startswith(b"GRID "):
+            return None
+        try:
+            lines = [fh.read(GRB_LINE).decode("ascii").split() for _ in range(3)]
+            ntxt, lentxt = int(lines[1][1]), int(lines[2][1])
+            total = 4 * GRB_LINE + ntxt * lentxt
+            for _ in range(ntxt):
+                name, kind, _, ndim, *dims = fh.read(lentxt).decode("ascii").split()
+                total += GRB_BYTES[kind] * int(np.prod([int(d) for d in dims[:int(ndim)]]))
+        except (UnicodeDecodeError, IndexError, ValueError, KeyError):
+            return "cut short: the file ends inside its text header" if fh.tell() >= size else None
+    return f"cut short: the file is {size:,} bytes, its header describes {total:,}" if size < total else None
+
 
 def read_mf6_grid(path: str) -> Mf6Grid:
     _need(path, "pfault_heads_grid")
     from flopy.mf6.utils import MfGrdFile
+    cut = grid_file_cut(path)
+    if cut:
+        raise InputError(f"-pfault_heads_grid {path}: {cut}; {CUT_FIX}")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -111,9 +179,16 @@ class Mf6Heads:
                 warnings.simplefilter("ignore")
                 self.file = flopy.utils.HeadFile(path, precision="auto")
             records = self.file.recordarray
+        except EOFError as exc:     # flopy's index ran past the end of the file in a record's header
+            if not starts_like_heads(path):
+                raise InputError(f"-pfault_heads_file {path}: not a MODFLOW head file (EOFError: {exc}); give the "
+                                 "binary head file of the model's output control (HEAD FILEOUT)") from None
+            raise InputError(f"-pfault_heads_file {path}: cut short: the file ends inside the header of a record; "
+                             f"{CUT_FIX}") from None
         except Exception as exc:  # noqa: BLE001  (flopy raises whatever its parser meets)
             raise InputError(f"-pfault_heads_file {path}: not a MODFLOW head file ({type(exc).__name__}: {exc}); "
                              "give the binary head file of the model's output control (HEAD FILEOUT)") from None
+        self._check_complete(records)
         nrow, ncol = (grid.shape[1], grid.shape[2]) if grid.kind == "DIS" else (1, grid.ncpl)
         dims = {(int(r), int(c)) for r, c in zip(records["nrow"], records["ncol"])}
         if dims != {(nrow, ncol)} or int(records["ilay"].max()) > grid.nlay:
@@ -138,8 +213,25 @@ class Mf6Heads:
         self.times = times
         self.shape = grid.shape
 
+    def _check_complete(self, records: np.ndarray) -> None:
+        """InputError when the last record's values run past the end of the file (a copy or a model run cut
+        short): flopy indexes a file by its records' headers and reads their values only when asked, so a cut
+        inside the values of the last record would otherwise surface as EOFError when the heads are read."""
+        f = self.file
+        end = int(f.iposarray[-1]) + int(f.get_databytes(records[-1]))
+        if end > f.totalbytes:
+            last = records[-1]
+            self.close()
+            raise InputError(f"-pfault_heads_file {self.path}: cut short: the file is {f.totalbytes:,} bytes, but "
+                             f"its last record (time {float(last['totim']):g}, layer {int(last['ilay'])}) ends at "
+                             f"byte {end:,}; {CUT_FIX}")
+
     def values(self, i: int) -> np.ndarray:
-        a = np.asarray(self.file.get_data(totim=self.times[i]), float).ravel()
+        try:
+            a = np.asarray(self.file.get_data(totim=self.times[i]), float).ravel()
+        except EOFError:        # the file was cut after it was opened
+            raise InputError(f"-pfault_heads_file {self.path}: cut short: the file ends inside the heads of time "
+                             f"{self.times[i]:g}; {CUT_FIX}") from None
         if np.isnan(a).any():
             raise InputError(f"-pfault_heads_file {self.path}: {int(np.isnan(a).sum())} heads are NaN at time "
                              f"{self.times[i]:g}; MODFLOW writes dry cells as -1e30 and inactive ones as 1e30: "
@@ -161,6 +253,8 @@ class TableHeads:
         try:
             self.file = h5py.File(path, "r")
         except OSError as exc:
+            if "truncated file" in str(exc):
+                raise InputError(f"-pfault_heads_file {path}: cut short (HDF5: {exc}); {CUT_FIX}") from None
             raise InputError(f"-pfault_heads_file {path}: not an HDF5 or NetCDF-4 file ({exc}); give a MODFLOW "
                              "head file with -pfault_heads_grid, or the layout in README") from None
         f = self.file
@@ -198,6 +292,16 @@ class TableHeads:
     def _bad(self, what: str) -> None:
         raise InputError(f"-pfault_heads_file {self.path}: {what} (layout: README, 'Pore pressure from a "
                          "groundwater model')")
+
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """The file's bounding box: (lo, hi), each x, y, z (z infinite where the file holds none; for messages)."""
+        lo, hi = np.full(3, -np.inf), np.full(3, np.inf)
+        if self.axes is None:
+            lo[:2], hi[:2] = self.nodes.min(axis=0), self.nodes.max(axis=0)
+        else:
+            for i, ax in enumerate(self.axes):
+                lo[i], hi[i] = ax[0], ax[-1]
+        return lo, hi
 
     def weights(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.axes is None:

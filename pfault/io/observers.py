@@ -5,6 +5,7 @@ put in place after the first completed step, so that a run that fails before it 
 from __future__ import annotations
 
 import errno
+import json
 import shutil
 import time
 from typing import Any
@@ -91,8 +92,10 @@ class RunOutput:
     Opened after the first solve (``open``); every method is collective unless it says otherwise."""
 
     def __init__(self, model: Any, state: Any, argv: list, surface: Any, restart_dir: str | None = None,
-                 restart_step: int | None = None) -> None:
+                 restart_step: int | None = None, metadata: dict | None = None) -> None:
         self.model, self.state, self.argv, self.surface = model, state, list(argv), surface
+        # {name: JSON value} written as NAME.json beside options.txt and into every checkpoint (the data files read)
+        self.metadata = dict(metadata or {})
         self.comm = model.comm
         self.restart_dir, self.restart_step = restart_dir, restart_step
         self.writer: Any = None             # rank 0, once open (a RunWriter)
@@ -132,7 +135,8 @@ class RunOutput:
         self.fields = StepOutput(self.comm, m.mesh, self.writer, sides, m.dofmap.max_sides, faces=m.faces.face,
                                  fault_id=m.fault_id, parallel=use_parallel)
         self.checkpoint = checkpoint.Writer(self.comm, m.mesh, faces=m.faces.face, n_faces=len(m.fault_id),
-                                            parallel_io=use_parallel)
+                                            parallel_io=use_parallel,
+                                            texts={k: json.dumps(v).encode() for k, v in self.metadata.items()})
         if not self.restart_dir and self.initial is not None:
             self.fields.write(0, 0.0, *self.initial)
 
@@ -146,7 +150,7 @@ class RunOutput:
                                fault_mesh=None if m.split is None else (m.serial.points, m.split.faces,
                                                                         m.split.fault_id),
                                surface_mesh=None if surface is None else (surface.points, surface.triangles))
-            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv)
+            writer.write_metadata(dict(PETSc.Options().getAll()), self.argv, self.metadata)
             if self.restart_dir:
                 writer.continue_from(self.restart_dir, int(self.restart_step or 0))
         except ValueError as exc:       # the series of the run it continues are of another mesh

@@ -4,7 +4,8 @@ pfault.io.parallel).
 
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
 - ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
-- ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash
+- ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash;
+  ``input_files.json``: the data files the run read, with their sizes and SHA-256 (pfault.io.provenance)
 - ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima, wall times and each rank's
   peak memory
 - ``checkpoint.h5``: the state after the last completed step (pfault.io.checkpoint)
@@ -36,7 +37,8 @@ if TYPE_CHECKING:
 # names pfault writes into a run directory: replaced by a new run; anything else there is carried over
 SERIES = ("fields", "fault", "surface")
 RUN_FILES = frozenset([f"{s}.{e}" for s in SERIES for e in ("xdmf", "h5")]
-                      + ["summary.json", "options.txt", "versions.json", "materials.json", "checkpoint.h5",
+                      + ["summary.json", "options.txt", "versions.json", "materials.json", "input_files.json",
+                         "checkpoint.h5",
                          "fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png",
                          "fissure_break.png",
                          # observations (pfault.io.stations, pfault.io.insar)
@@ -348,7 +350,12 @@ class RunWriter:
                 series.copy_steps(old, last_step)
         shutil.copyfile(os.path.join(run_dir, "checkpoint.h5"), self.file("checkpoint.h5"))
 
-    def write_metadata(self, options: dict[str, Any], argv: Sequence[str]) -> None:
+    def write_metadata(self, options: dict[str, Any], argv: Sequence[str],
+                       metadata: dict[str, Any] | None = None) -> None:
+        """options.txt, versions.json, materials.json and one ``NAME.json`` per entry of ``metadata`` (the data
+        files the run reads: input_files.json)."""
+        for name, value in (metadata or {}).items():
+            replace_json(self.file(name + ".json"), value)
         lines = ["# resolved options of this run (command: %s)" % " ".join(argv)]
         for k in sorted(options):
             v = options[k]

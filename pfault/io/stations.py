@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, run_on_root
+from ..paths import file_problem
 from .output import open_h5, replace_text
 from .observers import Observer
 from .probes import SIDE_NAMES, Located, PointProbe, locate_points, mesh_to_site
@@ -51,8 +52,9 @@ class Stations:
 def read_stations(path: str) -> Stations:
     """The stations of the CSV file ``path`` (InputError, naming the file and the fix, on anything wrong)."""
     where = f"{OPTION} {path}"
-    if not os.path.isfile(path):
-        raise InputError(f"{where}: no such file; give a CSV file whose first line names the columns "
+    problem = file_problem(path)
+    if problem:
+        raise InputError(f"{where}: {problem}; give a CSV file whose first line names the columns "
                          "name,x,y,z (and optionally side), then one station per line")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:     # a spreadsheet's byte-order mark is not text

@@ -22,6 +22,9 @@ class RunSummary:
     def __init__(self, model: Any, state: Any, solver: Any, costs: Any, restart_step: int | None = None) -> None:
         self.model, self.state, self.solver, self.costs = model, state, solver, costs
         self.restart_step = restart_step
+        # keys the run adds (the pore-pressure source's coverage, a restart's data files); a dict merges into the
+        # key of that name
+        self.extra: dict[str, Any] = {}
 
     def compose(self, steps: list, converged: bool, stop: str | None, running: bool = False) -> dict:
         """The summary of the step records ``steps`` (collective: the memory peak and the costs are every
@@ -59,6 +62,9 @@ class RunSummary:
             summary["stop_signal"] = stop
         if m.scene.restart_dir:
             summary["restart"] = {"from": m.scene.restart_dir, "step": self.restart_step}
+        for key, value in self.extra.items():
+            both = isinstance(value, dict) and isinstance(summary.get(key), dict)
+            summary[key] = {**summary[key], **value} if both else value
         return summary
 
     def solver_record(self, steps: list) -> dict:

@@ -6,12 +6,12 @@ faults), all addressed by their physical names.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
+from ..paths import file_problem
 from .serial import SerialMesh, orient_positive
 
 TET4, TRI3 = 4, 2
@@ -19,8 +19,9 @@ TET4, TRI3 = 4, 2
 
 def read_msh(path: str) -> SerialMesh:
     """The mesh of a gmsh file (MSH 4.1), its physical volumes the materials, its physical surfaces named."""
-    if not os.path.isfile(path):
-        raise InputError(f"-pfault_mesh_file: no such file '{path}'")
+    problem = file_problem(path)
+    if problem:
+        raise InputError(f"-pfault_mesh_file {path}: {problem}; give a gmsh MSH 4.1 file of linear tetrahedra")
     import gmsh
     initialized = gmsh.isInitialized()
     if not initialized:

@@ -9,6 +9,9 @@ equations and the output read it with ``cell_dp(t)``, which changes nothing. Eve
   last advanced from and the time it was advanced to (a step cut into sub-steps reads it within the step:
   a flow model's field is interpolated linearly in time there);
 - ``step_record()``: figures of the last advance for the step's record (empty for a table);
+- ``kind`` (``tables``, ``heads``, ``flow``) and ``unchanged(t_end)``: per local cell, whether the source changes
+  its pore pressure at no time of [0, t_end] (None where that is known only as the run goes: the flow model's);
+  pfault.sources.coverage counts those cells;
 - ``has_state``; ``state()`` / ``restore(state)``: its state (a flow model's ``FlowState``; a table has none: None),
   which the run's state records after every advance and a restart gives back;
 - ``destroy()``.
@@ -33,10 +36,32 @@ class FlowState:
     history: tuple
 
 
+def zero_on(breakpoints: Any, values: Any, t_end: float) -> np.ndarray:
+    """Whether piecewise-linear functions of time, constant beyond their ends, are zero on [0, t_end]: ``values``
+    (n breakpoints, ...) at the increasing ``breakpoints``; a function is zero there when it is at 0, at t_end and at
+    its breakpoints between. Returns one flag per function (the trailing shape of ``values``)."""
+    t = np.asarray(breakpoints, dtype=float)
+    v = np.asarray(values, dtype=float).reshape(len(t), -1)
+    ends = np.stack([_value_at(t, v, x) for x in (0.0, t_end)])
+    return np.all(np.concatenate([v[(t > 0.0) & (t < t_end)], ends]) == 0.0, axis=0).reshape(np.shape(values)[1:])
+
+
+def _value_at(t: np.ndarray, v: np.ndarray, x: float) -> np.ndarray:
+    """The rows ``v`` (one per breakpoint ``t``) interpolated linearly at time x, constant beyond the ends."""
+    if x <= t[0]:
+        return v[0]
+    if x >= t[-1]:
+        return v[-1]
+    i = int(np.searchsorted(t, x, side="right")) - 1
+    theta = (x - t[i]) / (t[i + 1] - t[i])
+    return (1.0 - theta) * v[i] + theta * v[i + 1]
+
+
 class TableSource:
     """dp(t) uniform within each material, from per-material tables (pfault.physics.loading.MaterialDrawdown)."""
 
     has_state = False       # nothing to checkpoint
+    kind = "tables"
 
     def __init__(self, drawdown: Any, cell_material: np.ndarray) -> None:
         self.drawdown = drawdown
@@ -51,6 +76,12 @@ class TableSource:
 
     def cell_dp(self, t: float) -> np.ndarray:
         return self.drawdown.cell_values(t, self.cell_material)
+
+    def unchanged(self, t_end: float) -> np.ndarray:
+        """Per local cell: its material has no table, or one that is zero on [0, t_end]."""
+        still = np.array([tab is None or bool(zero_on(tab.times, tab.values, t_end))
+                          for tab in self.drawdown.tables], dtype=bool)
+        return still[self.cell_material] if len(still) else np.ones(len(self.cell_material), dtype=bool)
 
     def step_record(self) -> dict:
         return {}
@@ -75,6 +106,7 @@ class FlowSource:
     interval of the last advance ``cell_dp`` interpolates linearly in time between the fields at its ends."""
 
     has_state = True        # its head, time and records are checkpointed
+    kind = "flow"
 
     def __init__(self, flow: Any) -> None:
         self.flow = flow
@@ -106,6 +138,10 @@ class FlowSource:
         if after(t, now) or after(now, t):
             raise ValueError(f"groundwater flow is at t = {now:g} s; its pore pressure at {t:g} s is not known")
         return self._current()
+
+    def unchanged(self, t_end: float) -> None:
+        """Known only as the flow is solved."""
+        return None
 
     def step_record(self) -> dict:
         """The flow's Krylov iterations in its last step and the largest drawdown (m) now (collective)."""

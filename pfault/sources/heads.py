@@ -16,6 +16,10 @@ groundwater model: it counts as outside, like a centroid beyond the model's exte
 error unless -pfault_heads_outside zero says that their pore pressure does not change. Generic files with
 ``pressure_change`` are used as they are (no reference subtracted).
 
+Heads that change the pore pressure of no cell up to the run's end are an error naming the reason (every cell
+outside, a file of one saved time, heads equal to the reference); a reference left to its default whose time is
+after the run's time 0 is a warning, recorded with the reference in the source's ``notes`` (summary.json).
+
 The map cell -> model cell and its weights is computed once; the values at every saved time are then gathered
 for this rank's cells only (every rank reads the whole file, once: reading costs each rank the file's size in
 I/O; it keeps nt x (its cells) values).
@@ -30,9 +34,10 @@ from typing import Any
 import numpy as np
 from mpi4py import MPI
 
-from ..errors import InputError, collective_check, run_on_all
+from ..errors import InputError, collective_check, run_on_all, warn
 from ..paths import beside_scene
 from ..units import UNITS, parse_quantity
+from . import zero_on
 
 OUTSIDE_ERROR, OUTSIDE_ZERO = "error", "zero"
 DRY = -1e29             # MODFLOW 6 writes a dry cell's head as -1e30 (DHDRY): at or below this, dry
@@ -140,13 +145,19 @@ def check_heads_files(settings: HeadsSettings, time_end: float) -> None:
 
 
 class HeadsSource:
-    """dp per local cell at the saved times (``table``, nt x cells, Pa) at ``seconds``, linear in between."""
+    """dp per local cell at the saved times (``table``, nt x cells, Pa) at ``seconds``, linear in between;
+    ``outside``: the local cells outside the groundwater model, which get no change (-pfault_heads_outside zero);
+    ``notes``: what summary.json records of the heads (the reference time, whether the user chose it, warnings)."""
 
     has_state = False       # a function of time: nothing to checkpoint
+    kind = "heads"
 
-    def __init__(self, seconds: np.ndarray, table: np.ndarray) -> None:
+    def __init__(self, seconds: np.ndarray, table: np.ndarray, outside: np.ndarray | None = None,
+                 notes: dict | None = None) -> None:
         self.seconds = np.asarray(seconds, float)
         self.table = table
+        self.outside = np.zeros(table.shape[1], dtype=bool) if outside is None else outside
+        self.notes = dict(notes or {})
 
     @property
     def active(self) -> bool:
@@ -164,6 +175,10 @@ class HeadsSource:
         i = int(np.searchsorted(s, t, side="right")) - 1
         theta = (t - s[i]) / (s[i + 1] - s[i])
         return (1.0 - theta) * self.table[i] + theta * self.table[i + 1]
+
+    def unchanged(self, t_end: float) -> np.ndarray:
+        """Per local cell: dp is zero at every time of [0, t_end]."""
+        return zero_on(self.seconds, self.table, t_end)
 
     def step_record(self) -> dict:
         return {}
@@ -227,9 +242,25 @@ def _generic_table(heads: Any, points: np.ndarray, ref: int, rho_g: float) -> tu
     return table, outside
 
 
-def build_heads_source(comm: Any, settings: HeadsSettings, centroids: np.ndarray) -> HeadsSource:
+@dataclass(frozen=True)
+class ReadHeads:
+    """What ``build_heads_source`` read: the saved times (s), dp per cell at them (nt x cells, Pa), the cells
+    outside the model, the reference's index, the quantity (``head`` or ``pressure_change``) and the model's
+    bounding box in site coordinates (lo, hi)."""
+    seconds: np.ndarray
+    table: np.ndarray
+    outside: np.ndarray
+    ref: int
+    quantity: str
+    extent: tuple
+
+
+def build_heads_source(comm: Any, settings: HeadsSettings, centroids: np.ndarray,
+                       time_end: float | None = None) -> HeadsSource:
     """Collective: the source for this rank's cells (centroids in mesh coordinates). Cells outside the
-    groundwater model are an InputError on every rank unless -pfault_heads_outside zero."""
+    groundwater model are an InputError on every rank unless -pfault_heads_outside zero; so are heads that change
+    the pore pressure in no cell up to ``time_end`` (s; None: the last saved time). A default reference that is
+    not the run's time 0 is a warning (``reference_notes``)."""
     points = centroids + np.asarray(settings.origin)[None, :]
     rho_g = settings.water_density * settings.gravity
 
@@ -241,17 +272,22 @@ def build_heads_source(comm: Any, settings: HeadsSettings, centroids: np.ndarray
                 table, outside = _mf6_table(heads, grid, points, ref, rho_g, settings.length_unit)
             else:
                 table, outside = _generic_table(heads, points, ref, rho_g)
-            return heads.seconds.copy(), table, outside
+            extent = (grid if grid is not None else heads).extent()
+            quantity = "head" if grid is not None else heads.quantity
+            return ReadHeads(heads.seconds.copy(), table, outside, ref, quantity, extent)
         finally:
             heads.close()
 
-    seconds, table, outside = run_on_all(comm, read)
-    _check_outside(comm, settings, points, outside)
-    return HeadsSource(seconds, table)
+    got = run_on_all(comm, read)
+    _check_outside(comm, settings, points, got)
+    end = float(got.seconds[-1]) if time_end is None else float(time_end)
+    _check_change(comm, settings, got, end)
+    return HeadsSource(got.seconds, got.table, got.outside, reference_notes(comm, settings, got))
 
 
-def _check_outside(comm: Any, settings: HeadsSettings, points: np.ndarray, outside: np.ndarray) -> None:
+def _check_outside(comm: Any, settings: HeadsSettings, points: np.ndarray, got: ReadHeads) -> None:
     mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
+    outside = got.outside
     n_out = mpi.allreduce(int(outside.sum()), op=MPI.SUM)
     if n_out == 0 or settings.outside == OUTSIDE_ZERO:
         return
@@ -260,11 +296,86 @@ def _check_outside(comm: Any, settings: HeadsSettings, points: np.ndarray, outsi
     lo, hi = np.empty(3), np.empty(3)
     mpi.Allreduce(p.min(axis=0) if len(p) else np.full(3, np.inf), lo, op=MPI.MIN)
     mpi.Allreduce(p.max(axis=0) if len(p) else np.full(3, -np.inf), hi, op=MPI.MAX)
-    where = ", ".join(f"{a} {lo[i]:.6g}..{hi[i]:.6g}" for i, a in enumerate("xyz"))
-    kind = "outside the groundwater model or in its inactive cells" if settings.grid else \
-        "outside the extent of the file's grid or points"
     collective_check(comm, f"-pfault_heads_file {settings.file}: {n_out:,} of {n_all:,} mesh cells have their "
-                           f"centroid {kind} (site coordinates {where} m); place the mesh with "
-                           "-pfault_mesh_origin, or say what they get: -pfault_heads_outside zero (no pore-pressure "
-                           "change there)")
+                           f"centroid {_outside_words(settings)} (site coordinates {_box(lo, hi)} m; the "
+                           f"{'model' if settings.grid else 'file'} spans {_box(*got.extent)} m); "
+                           f"{_placement(settings)}, or say what they get: -pfault_heads_outside zero (no "
+                           "pore-pressure change there)")
+
+
+def _outside_words(settings: HeadsSettings) -> str:
+    return "outside the groundwater model or in its inactive cells" if settings.grid else \
+        "outside the extent of the file's grid or points"
+
+
+def _box(lo: np.ndarray, hi: np.ndarray) -> str:
+    """x lo..hi, y lo..hi[, z lo..hi] (a coordinate the box does not bound is left out)."""
+    return ", ".join(f"{a} {lo[i]:.6g}..{hi[i]:.6g}" for i, a in enumerate("xyz") if np.isfinite(lo[i] + hi[i]))
+
+
+def _placement(settings: HeadsSettings) -> str:
+    """Every option that places the mesh in the groundwater model's coordinates."""
+    if settings.grid:
+        return ("check what places the mesh in the model: -pfault_mesh_origin (site = mesh + origin), "
+                "-pfault_heads_length_unit (the model's length unit in metres, 0.3048 for feet; now "
+                f"{settings.length_unit:g}) and -pfault_heads_grid {settings.grid} (the grid file of the model that "
+                "wrote the heads, whose XORIGIN, YORIGIN and ANGROT place it)")
+    return ("check what places the mesh in the file's coordinates (site metres): -pfault_mesh_origin (site = mesh "
+            "+ origin) and the file's x, y (and z)")
+
+
+def _days(seconds: float) -> str:
+    """A time for messages: in days from a day on, else in seconds."""
+    days = seconds / 86400.0
+    return f"{days:.10g} day{'' if days == 1 else 's'}" if abs(seconds) >= 86400.0 else f"{seconds:.10g} s"
+
+
+def _check_change(comm: Any, settings: HeadsSettings, got: ReadHeads, time_end: float) -> None:
+    """InputError on every rank when the heads change the pore pressure of no cell on [0, time_end]: the run
+    would compute nothing, and the reason is a mistake in the files or the options (said in the line)."""
+    mpi = comm.tompi4py() if hasattr(comm, "tompi4py") else comm
+    counts = np.array([int(np.count_nonzero(~zero_on(got.seconds, got.table, time_end))),
+                       len(got.outside), int(got.outside.sum())])
+    changed, n_all, n_out = mpi.allreduce(counts, op=MPI.SUM)
+    if changed or n_all == 0:
+        return
+    head = f"-pfault_heads_file {settings.file}"
+    if n_out == n_all:
+        reason = (f"all {n_all:,} mesh cells have their centroid {_outside_words(settings)}, so "
+                  "-pfault_heads_outside zero gives none of them a pore-pressure change and the run has no load; "
+                  f"{_placement(settings)}")
+    elif got.quantity == "pressure_change":
+        reason = (f"its pressure changes are zero in every mesh cell at every saved time up to the run's end "
+                  f"({_days(time_end)}); give the file of the run that changed the pore pressure")
+    elif len(got.seconds) == 1:
+        reason = (f"it holds the heads of one saved time ({_days(got.seconds[0])}), which are the reference heads "
+                  "h_ref, so dp = rho_w g (h - h_ref) is zero at every time; give a file with the heads of the "
+                  "times after the reference too (MODFLOW: SAVE HEAD at every stress period)")
+    else:
+        inside = f" of the {n_all - n_out:,} cells inside the model" if n_out else ""
+        reason = (f"the heads{inside} at every saved time up to the run's end ({_days(time_end)}) equal the "
+                  f"reference heads, those of {_days(got.seconds[got.ref])}, so there is no pore-pressure change; "
+                  "give the head file of the run whose heads change, or choose the reference with "
+                  "-pfault_heads_reference_time (a saved time)")
+    raise InputError(f"{head}: {reason}")
+
+
+def reference_notes(comm: Any, settings: HeadsSettings, got: ReadHeads) -> dict:
+    """What summary.json records of the reference heads; a warning (printed once, and recorded) when the user
+    left the reference to its default and the first saved time is after the run's time 0: the file may start
+    after pumping did (MODFLOW saves no time 0; a steady-state first stress period gives the heads at rest)."""
+    t_ref = float(got.seconds[got.ref])
+    chosen = settings.reference_time is not None
+    notes: dict[str, Any] = {"reference_time_s": t_ref if got.quantity == "head" else None,
+                             "reference_chosen": chosen, "saved_times": int(len(got.seconds)), "warnings": []}
+    if chosen or got.quantity != "head" or t_ref <= 0.0:
+        return notes
+    text = (f"-pfault_heads_file {settings.file}: the reference heads h_ref are those of its first saved time, "
+            f"{_days(t_ref)}, not of the run's time 0: drawdown before that time (pumping that started earlier) is "
+            "not in the load; if the model was at rest then, say so with -pfault_heads_reference_time "
+            f"{t_ref / 86400.0:.10g}*day (this warning then goes), else give heads from before pumping (a "
+            "steady-state first stress period)")
+    warn(comm, text)
+    notes["warnings"].append(text)
+    return notes
 

@@ -35,7 +35,7 @@ import numpy as np
 from ..errors import InputError
 from ..optionsfile import ArgumentError, read_options_file
 from ..options import spec_for
-from ..paths import beside_scene
+from ..paths import beside_scene, file_problem
 from ..units import parse_list, parse_quantity, parse_table
 
 NUMERIC_KINDS = ("real", "quantity", "property")    # property: a material property given as a number
@@ -84,8 +84,9 @@ class Observations:
 
 def _rows(path, what, fix):
     """(line number, header, rows) of a CSV file; '#' lines and blank lines skipped."""
-    if not os.path.isfile(path):
-        raise CalibrationInputError(f"{what} file {path}: no such file; give a CSV file ({fix})")
+    problem = file_problem(path)
+    if problem:
+        raise CalibrationInputError(f"{what} file {path}: {problem}; give a CSV file ({fix})")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             lines = fh.read().splitlines()
@@ -253,8 +254,9 @@ def scene_facts(scene: str) -> SceneFacts:
 def station_names(path: str, scene: str) -> list[str]:
     """The names in a station file, read as pfault.io.stations reads it (which pfault checks fully in the
     runs; that module is not imported here: it starts PETSc)."""
-    if not os.path.isfile(path):
-        raise CalibrationInputError(f"scene {scene}: -pfault_stations {path}: no such file; give the scene's "
+    problem = file_problem(path)
+    if problem:
+        raise CalibrationInputError(f"scene {scene}: -pfault_stations {path}: {problem}; give the scene's "
                                     "station file (a path from the directory pfault runs in, or beside the scene)")
     with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
         lines = [line for line in fh.read().splitlines() if line.strip() and not line.lstrip().startswith("#")]

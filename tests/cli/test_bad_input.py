@@ -165,7 +165,7 @@ CASES = [
     Case("misspelled_option", scene("-pfault_bc_top_typ", "free"), 1, "did you mean -pfault_bc_top_type?"),
     Case("bad_choice", scene("-pfault_bc_top_type", "clamped"), 1, "-pfault_bc_top_type: 'clamped' is not one of"),
     Case("missing_mesh_file", scene("-pfault_mesh_file", "nowhere.msh"), 1,
-         "-pfault_mesh_file: no such file 'nowhere.msh'"),
+         "-pfault_mesh_file nowhere.msh: no such file; give a gmsh MSH 4.1 file"),
     # material properties from spatial fields (pfault.properties): checked before anything is written
     Case("field_with_nans", field_scene("young_modulus", "z,E [MPa]\n-100,10\n-50,nan\n0,10\n"), 1,
          "field.csv: 1 of 3 E are NaN or infinite (line 3); fill them (or remove those points) and run again"),
@@ -344,8 +344,9 @@ def test_failure_on_one_rank_alone_is_recorded_and_continued(tmp_path):
     assert summary["converged"] and not summary["interrupted"] and summary["ranks"] == 2
     assert summary["completed_steps"] == [1, 2] and [r["step"] for r in summary["steps"]] == [1, 2]
     assert summary["max_subsidence_m"] == pytest.approx(0.8333333333 / 5, rel=1e-9)
-    assert sorted(os.listdir(out)) == ["checkpoint.h5", "fields.h5", "fields.xdmf", "materials.json", "options.txt",
-                                       "summary.json", "surface.h5", "surface.xdmf", "versions.json"]
+    assert sorted(os.listdir(out)) == ["checkpoint.h5", "fields.h5", "fields.xdmf", "input_files.json",
+                                       "materials.json", "options.txt", "summary.json", "surface.h5", "surface.xdmf",
+                                       "versions.json"]
     assert sorted(os.listdir(tmp_path)) == ["out"]
     code, _, stderr = run_pfault(["-m", "pfault", OED, "-pfault_restart", str(out), "-pfault_figures", "false"], 2)
     assert code == 0, stderr[-3000:]

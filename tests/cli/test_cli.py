@@ -42,7 +42,7 @@ BAD = [
     (["-pfault_material_soil_poisson_ratio", "0.7"], "-pfault_material_soil_poisson_ratio: must lie in (-1, 0.5)"),
     (["-pfault_time_end", "10*years"], "unknown unit 'years'"),
     (["-pfault_bc_top_type", "clamped"], "-pfault_bc_top_type: 'clamped' is not one of"),
-    (["-pfault_mesh_file", "nowhere.msh"], "-pfault_mesh_file: no such file 'nowhere.msh'"),
+    (["-pfault_mesh_file", "nowhere.msh"], "-pfault_mesh_file nowhere.msh: no such file; give a gmsh MSH 4.1 file"),
     (["-pfault_solver", "superfast"], "-pfault_solver superfast"),
     (["-pfault_contact_slip_augmentation", "0.01"], "unused option -pfault_contact_slip_augmentation"),
     (["-pfault_time_max_cuts", "-1"], "-pfault_time_max_cuts: give 0 to 10 halvings"),

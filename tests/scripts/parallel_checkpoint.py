@@ -43,7 +43,7 @@ class Gathered(Observer):
             return
         out, sim = self.output, self.sim
         gathered = checkpoint.Writer(sim.comm, sim.model.mesh, out.checkpoint.faces, out.checkpoint.n_faces,
-                                     parallel_io=False)
+                                     parallel_io=False, texts=out.checkpoint.texts)
         mine, theirs = (os.path.join(d, str(result.step)) for d in (own_dir, gathered_dir))
 
         def copy():

@@ -6,8 +6,12 @@
 - a head field varying in x gives each cell the head of the MODFLOW cell of its centroid, linear in time between
   saved times, dp = rho_w g (h - h_ref); dry and inactive cells as documented;
 - the generic HDF5 layout reproduces a linear field exactly (grid: multilinear; points: Delaunay);
-- bad files: one line naming the file and the fix.
+- bad files: one line naming the file and the fix; files cut short; heads that change no cell; a reference after
+  the run's time 0 (a warning);
+- the cells a source leaves unloaded (pfault.sources.coverage).
 """
+
+import dataclasses
 
 import flopy
 import h5py
@@ -18,8 +22,10 @@ from mpi4py import MPI
 
 from pfault.errors import InputError
 from pfault.io.mf6_write import write_dis_grb, write_disv_grb, write_heads
-from pfault.sources import lookup
-from pfault.sources.heads import HeadsSettings, build_heads_source, check_heads_files
+from pfault.physics.loading import MaterialDrawdown, Table
+from pfault.sources import TableSource, lookup, zero_on
+from pfault.sources.coverage import measure
+from pfault.sources.heads import HeadsSettings, HeadsSource, build_heads_source, check_heads_files
 
 RHO_G = 1000.0 * 9.80665
 
@@ -212,9 +218,13 @@ def test_dry_and_inactive_cells(tmp_path):
         2.0])                   # dry at the reference, wet now at h = -6 above z = -8: 2 m of water
     assert np.allclose(dp, expected, rtol=1e-13)
     with pytest.raises(InputError, match=r"1 of 6 mesh cells have their centroid outside the groundwater model "
-                                         r"or in its inactive cells \(site coordinates x 35\.\.35, y 5\.\.5, z -5\.\.-5 "
-                                         r"m\); place the mesh with -pfault_mesh_origin, or say what they get: "
-                                         r"-pfault_heads_outside zero"):
+                                         r"or in its inactive cells \(site coordinates x 35\.\.35, y 5\.\.5, "
+                                         r"z -5\.\.-5 m; the model spans x 0\.\.40, y 0\.\.10, z -20\.\.0 m\); "
+                                         r"check what places the mesh in the model: -pfault_mesh_origin \(site = "
+                                         r"mesh \+ origin\), -pfault_heads_length_unit \(the model's length unit in "
+                                         r"metres, 0\.3048 for feet; now 1\) and -pfault_heads_grid .*d\.dis\.grb "
+                                         r"\(the grid file of the model that wrote the heads, whose XORIGIN, YORIGIN "
+                                         r"and ANGROT place it\), or say what they get: -pfault_heads_outside zero"):
         build_heads_source(MPI.COMM_SELF, settings(tmp_path / "d.hds", tmp_path / "d.dis.grb"), centroids)
 
 
@@ -294,3 +304,124 @@ def test_bad_files_are_one_line_naming_the_file_and_the_fix(tmp_path):
         build_heads_source(MPI.COMM_SELF, settings(tmp_path / "nan.h5"), np.array([[0.5, 0.0, 0.0]]))
     with pytest.raises(InputError, match=r"shape\.h5: 'head' is \(2, 3\), the times and axes ask for \(2, 1, 2\)"):
         check_heads_files(settings(tmp_path / "shape.h5"), 1.0)
+
+
+def two_columns(tmp_path, times, heads, bottom=-100.0):
+    """A one-layer DIS model of two 5 m columns over (0..10) x (0..10), its top at 0 m: (settings, centroids of
+    four cells, two per column, one at z -25 and one at -75)."""
+    write_dis_grb(str(tmp_path / "c.dis.grb"), [5.0, 5.0], [10.0], np.zeros((1, 2)), np.full((1, 1, 2), bottom))
+    write_heads(str(tmp_path / "c.hds"), times, np.asarray(heads, float).reshape(len(times), 1, 1, 2))
+    centroids = np.array([[2.5, 5.0, -25.0], [7.5, 5.0, -25.0], [2.5, 5.0, -75.0], [7.5, 5.0, -75.0]])
+    return settings(tmp_path / "c.hds", tmp_path / "c.dis.grb"), centroids
+
+
+def test_heads_that_change_no_cell_are_one_line_naming_the_reason(tmp_path):
+    """Heads that load no cell up to the run's end stop the run: a file of one saved time (its heads are the
+    reference), heads equal to the reference at every saved time up to the end (though they change after it), every
+    cell outside the model under -pfault_heads_outside zero (the line names every option that places the mesh)."""
+    s, c = two_columns(tmp_path, [3.0], [[1.0, 2.0]])
+    with pytest.raises(InputError) as err:
+        build_heads_source(MPI.COMM_SELF, s, c, 3 * 86400.0)
+    assert str(err.value) == (
+        f"-pfault_heads_file {s.file}: it holds the heads of one saved time (3 days), which are the reference heads "
+        "h_ref, so dp = rho_w g (h - h_ref) is zero at every time; give a file with the heads of the times after "
+        "the reference too (MODFLOW: SAVE HEAD at every stress period)")
+    s, c = two_columns(tmp_path, [0.0, 5.0, 10.0], [[1.0, 2.0], [1.0, 2.0], [0.0, 2.0]])
+    with pytest.raises(InputError) as err:
+        build_heads_source(MPI.COMM_SELF, s, c, 5 * 86400.0)
+    assert str(err.value) == (
+        f"-pfault_heads_file {s.file}: the heads at every saved time up to the run's end (5 days) equal the "
+        "reference heads, those of 0 s, so there is no pore-pressure change; give the head file of the run whose "
+        "heads change, or choose the reference with -pfault_heads_reference_time (a saved time)")
+    # a day later the first column's heads have begun to change: the run goes on
+    src = build_heads_source(MPI.COMM_SELF, s, c, 6 * 86400.0)
+    assert src.unchanged(6 * 86400.0).tolist() == [False, True, False, True]
+    assert src.unchanged(5 * 86400.0).all() and src.notes["warnings"] == []
+    far = dataclasses.replace(s, origin=(1000.0, 0.0, 0.0), outside="zero")
+    with pytest.raises(InputError) as err:
+        build_heads_source(MPI.COMM_SELF, far, c, 6 * 86400.0)
+    assert str(err.value) == (
+        f"-pfault_heads_file {s.file}: all 4 mesh cells have their centroid outside the groundwater model or in its "
+        "inactive cells, so -pfault_heads_outside zero gives none of them a pore-pressure change and the run has no "
+        "load; check what places the mesh in the model: -pfault_mesh_origin (site = mesh + origin), "
+        "-pfault_heads_length_unit (the model's length unit in metres, 0.3048 for feet; now 1) and "
+        f"-pfault_heads_grid {s.grid} (the grid file of the model that wrote the heads, whose XORIGIN, YORIGIN and "
+        "ANGROT place it)")
+
+
+def test_a_reference_after_time_zero_is_a_warning_unless_chosen(tmp_path, capsys):
+    """Heads whose first saved time is 1 year into the run become the reference with a warning (printed once,
+    recorded in the notes summary.json takes); choosing that reference says it is meant, and nothing is printed."""
+    s, c = two_columns(tmp_path, [365.25, 730.5], [[1.0, 2.0], [0.0, 0.0]])
+    src = build_heads_source(MPI.COMM_SELF, s, c, 730.5 * 86400.0)
+    err = capsys.readouterr().err
+    line = (f"pfault: warning: -pfault_heads_file {s.file}: the reference heads h_ref are those of its first saved "
+            "time, 365.25 days, not of the run's time 0: drawdown before that time (pumping that started earlier) "
+            "is not in the load; if the model was at rest then, say so with -pfault_heads_reference_time "
+            "365.25*day (this warning then goes), else give heads from before pumping (a steady-state first stress "
+            "period)")
+    assert err == line + "\n"
+    assert src.notes == {"reference_time_s": 365.25 * 86400.0, "reference_chosen": False, "saved_times": 2,
+                         "warnings": [line.removeprefix("pfault: warning: ")]}
+    chosen = dataclasses.replace(s, reference_time=365.25 * 86400.0)
+    src = build_heads_source(MPI.COMM_SELF, chosen, c, 730.5 * 86400.0)
+    assert capsys.readouterr().err == "" and src.notes["reference_chosen"] and src.notes["warnings"] == []
+
+
+def test_cut_head_and_grid_files_are_one_line(tmp_path):
+    """A head file cut inside its last record's values or inside a record's header, a grid file cut inside its
+    values or inside its text header, an HDF5 file cut short: each is one line saying so (no EOFError from flopy,
+    no reshape error, no run on a grid whose last arrays are missing); a grid file given as the head file is still
+    'not a MODFLOW head file'."""
+    s, _ = two_columns(tmp_path, [0.0, 1.0, 2.0], np.zeros((3, 2)))
+    whole = (tmp_path / "c.hds").read_bytes()
+    grid = (tmp_path / "c.dis.grb").read_bytes()
+    fix = ("the copy or the model run that wrote it stopped before the end: copy the file again, or run the model to "
+           "its end")
+    cases = [("c.hds", whole[:-3], "heads", f"cut short: the file is {len(whole) - 3:,} bytes, but its last record "
+              f"(time 2, layer 1) ends at byte {len(whole):,}; {fix}"),
+             ("c.hds", whole[:-(16 + 20)], "heads", f"cut short: the file ends inside the header of a record; {fix}"),
+             ("c.dis.grb", grid[:-5], "grid", f"cut short: the file is {len(grid) - 5:,} bytes, its header describes "
+              f"{len(grid):,}; {fix}"),
+             ("c.dis.grb", grid[:230], "grid", f"cut short: the file ends inside its text header; {fix}")]
+    for name, data, which, message in cases:
+        (tmp_path / "cut").mkdir(exist_ok=True)
+        path = tmp_path / "cut" / name
+        path.write_bytes(data)
+        cut = dataclasses.replace(s, **{"file" if which == "heads" else "grid": str(path)})
+        with pytest.raises(InputError) as err:
+            check_heads_files(cut, 1.0)
+        option = "-pfault_heads_file" if which == "heads" else "-pfault_heads_grid"
+        assert str(err.value) == f"{option} {path}: {message}"
+        path.unlink()
+    with pytest.raises(InputError, match="not a MODFLOW head file"):
+        check_heads_files(dataclasses.replace(s, file=s.grid), 1.0)
+    write_h5(tmp_path / "g.h5", [0.0, 1.0], np.zeros((2, 1, 2)), x=[0.0, 1.0], y=[0.0])
+    data = (tmp_path / "g.h5").read_bytes()
+    (tmp_path / "g.h5").write_bytes(data[:-100])
+    with pytest.raises(InputError, match=r"g\.h5: cut short \(HDF5: .*truncated file.*\); the copy or the model run"):
+        check_heads_files(settings(tmp_path / "g.h5"), 1.0)
+
+
+def test_coverage_counts_cells_and_volume_without_a_change():
+    """pfault.sources.coverage on one rank: the cells a source leaves unloaded over [0, t_end] and their share of
+    the volume; tables: a material without a table, or with one that is zero up to t_end, loads none of its cells."""
+    assert zero_on([0.0, 10.0, 20.0], [[0.0, 0.0], [0.0, 1.0], [1.0, 1.0]], 10.0).tolist() == [True, False]
+    assert zero_on([0.0, 10.0, 20.0], [[0.0, 0.0], [0.0, 1.0], [1.0, 1.0]], 11.0).tolist() == [False, False]
+    assert zero_on([5.0], [[0.0, 2.0]], 9.0).tolist() == [True, False]
+    tables = MaterialDrawdown([Table((0.0, 10.0), (0.0, -1.0)), None, Table((0.0, 5.0, 10.0), (0.0, 0.0, -1.0))])
+    source = TableSource(tables, np.array([0, 1, 2, 2]))
+    volumes = np.array([1.0, 2.0, 3.0, 4.0])
+    cov = measure(MPI.COMM_SELF, source, volumes, 5.0)
+    assert (cov.source, cov.cells, cov.unloaded_cells, cov.outside_cells) == ("tables", 4, 3, None)
+    assert cov.unloaded_volume_fraction == pytest.approx(0.9, rel=1e-15)
+    assert cov.line() == "pfault: pore-pressure change in 1 of 4 cells (10 % of the volume); none in 3 (90 %)"
+    assert measure(MPI.COMM_SELF, source, volumes, 10.0).unloaded_cells == 1
+    heads = HeadsSource(np.array([0.0, 1.0]), np.array([[0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 2.0]]),
+                        np.array([False, True, True, False]), {"reference_time_s": 0.0})
+    cov = measure(MPI.COMM_SELF, heads, volumes, 1.0)
+    assert cov.summary() == {"source": "heads", "cells": 4, "unloaded_cells": 2, "unloaded_volume_fraction": 0.5,
+                             "outside_cells": 2, "outside_volume_fraction": 0.5, "reference_time_s": 0.0}
+    assert cov.line() == ("pfault: pore-pressure change in 2 of 4 cells (50 % of the volume); none in 2 (50 %), 2 of "
+                          "them (50 % of the volume) outside the groundwater model (-pfault_heads_outside zero)")
+    assert measure(MPI.COMM_SELF, TableSource(MaterialDrawdown([None]), np.zeros(4, int)), volumes, 1.0).line() is None
