@@ -24,6 +24,7 @@ class RunSummary:
     def __init__(self, model: Any, state: Any, solver: Any, costs: Any, restart_step: int | None = None) -> None:
         self.model, self.state, self.solver, self.costs = model, state, solver, costs
         self.restart_step = restart_step
+        self.partition = partition(model)
 
     def compose(self, steps: list, converged: bool, stop: str | None, running: bool = False) -> dict:
         """The summary of the step records ``steps`` (collective: the memory peak and the costs are every
@@ -45,6 +46,7 @@ class RunSummary:
             "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
             "memory_peak_mib": memory_peak_mib(m.comm),
+            "partition": self.partition,
             "converged": bool(converged),
             "effects": self.costs.record(m.scene.effects, len([r for r in steps if not r.get("initial")])),
             # a run in progress, or one killed before it could say how it ended, reads running: true
@@ -108,6 +110,15 @@ def beside_height(model: Any, n_faults: int) -> list:
     np.add.at(sums, faces.fault, np.column_stack([1.5 * volume.sum(axis=1), faces.area]))
     sums = model.comm.tompi4py().allreduce(sums)
     return [float(h / a) if a > 0 else 0.0 for h, a in sums]
+
+
+def partition(model: Any) -> dict:
+    """What each rank owns, in rank order: its cells, vertices and fault faces (a rank may own none on a small
+    mesh; the results do not depend on it). Collective."""
+    mesh = model.mesh
+    nf = 0 if model.faults is None else model.faults.faces.nf
+    counts = model.comm.tompi4py().allgather((len(mesh.cells), int(np.count_nonzero(mesh.vert_owned)), int(nf)))
+    return {key: [int(c[k]) for c in counts] for k, key in enumerate(("cells", "vertices", "fault_faces"))}
 
 
 def memory_peak_mib(comm: Any) -> list:
