@@ -14,10 +14,10 @@ largest) carry zero. Rank 0, on the output mesh (pfault.simulation), NumPy only.
 The fissure-prone length (``fissure_prone``) sums, over the connected zones of triangles whose horizontal strain
 exceeds ``-pfault_hazard_strain_threshold``, the length of each zone along the direction a tension fissure would
 run there (normal to the largest principal strain, averaged over the zone): the length of the land-surface trace a
-fissure could take, which a plan's pumping lengthens or shortens. Zones are connected through the edges of the land
-surface as it lies, so the two sides of a split fault, whose vertices the output mesh holds twice (one copy per
-side, at the same place), join along its trace: a stretch of land surface strained on both sides of a fault is one
-zone, counted once.
+fissure could take, which a plan's pumping lengthens or shortens. A zone is the triangles that touch one another
+(share a point) on the land surface as it lies, so the two sides of a split fault, whose vertices the output mesh
+holds twice (one copy per side, at the same place), join along its trace: a stretch of land surface strained on both
+sides of a fault is one zone, counted once.
 """
 
 from __future__ import annotations
@@ -96,16 +96,15 @@ def same_place(points: np.ndarray) -> np.ndarray:
 
 
 def _zones(triangles: np.ndarray) -> np.ndarray:
-    """Label (0..n-1) of the edge-connected zone of every triangle (triangles sharing an edge's two point ids)."""
+    """Label (0..n-1) of the connected zone of every triangle: triangles sharing a point id are one zone (a
+    triangle that touches a zone at a corner belongs to that stretch of land surface, and is not a fissure of its
+    own)."""
     m = len(triangles)
-    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    owner = np.repeat(np.arange(m), 3)
-    _, inv = np.unique(edges, axis=0, return_inverse=True)
-    inv = inv.ravel()
-    order = np.argsort(inv, kind="stable")
-    edge, tri = inv[order], owner[order]
-    same = edge[1:] == edge[:-1]
-    pairs = np.column_stack([tri[:-1][same], tri[1:][same]])     # triangles in turn around every shared edge
+    points, owner = triangles.ravel(), np.repeat(np.arange(m), 3)
+    order = np.argsort(points, kind="stable")
+    point, tri = points[order], owner[order]
+    same = point[1:] == point[:-1]
+    pairs = np.column_stack([tri[:-1][same], tri[1:][same]])     # triangles in turn around every shared point
     label = np.arange(m)
     while True:
         low = np.minimum(label[pairs[:, 0]], label[pairs[:, 1]])
@@ -121,9 +120,9 @@ def _zones(triangles: np.ndarray) -> np.ndarray:
 
 def fissure_prone(points: np.ndarray, triangles: np.ndarray, u: np.ndarray, threshold: float) -> dict[str, float]:
     """Fissure-prone length and area of the land surface (module docstring): the triangles whose horizontal
-    strain exceeds ``threshold``, grouped in zones connected through edges at the same place (``same_place``:
-    across a split fault's trace too); per zone the union of the triangles' extents along the zone's mean fissure
-    direction (area-weighted mean of the doubled angle), summed over the zones."""
+    strain exceeds ``threshold``, grouped in zones of triangles that touch at a point (``same_place``: across a
+    split fault's trace too); per zone the union of the triangles' extents along the zone's mean fissure direction
+    (area-weighted mean of the doubled angle), summed over the zones."""
     ok, exx, eyy, exy, _, _ = _strain(points, triangles, u)
     strain = 0.5 * (exx + eyy) + np.sqrt(0.25 * (exx - eyy) ** 2 + exy ** 2)
     prone = ok & (strain > threshold)

@@ -128,3 +128,21 @@ def test_two_separate_bands_add():
     out = fissure_prone(pts, tris, u, 2e-4)
     assert out["fissure_prone_length_m"] == pytest.approx(2 * LY, rel=1e-12)
     assert out["fissure_prone_area_m2"] == pytest.approx(2 * WIDTH * LY, rel=1e-12)
+
+
+def test_a_triangle_touching_a_zone_at_a_corner_is_part_of_it():
+    """A band of tension 2 km long and one small triangle beyond it that touches the band at one corner only, in
+    tension across the band's direction (its own fissure would run 10 m along x): one stretch of land surface,
+    2 km; counted apart, it would add its 10 m."""
+    pts, tris, _ = grid(40, 20, 4000.0, 2000.0)
+    u = np.zeros_like(pts)
+    u[:, 0] = 5e-4 * np.clip(pts[:, 0] - 1000.0, 0.0, 200.0)
+    band = pts[tris].mean(axis=1)[:, 0] < 1200.0
+    corner = int(np.flatnonzero((pts[:, 0] == 1200.0) & (pts[:, 1] == 1000.0))[0])
+    extra = pts[corner] + np.array([[10.0, 0.0, 0.0], [10.0, 10.0, 0.0]])
+    u_extra = u[corner] + np.array([[0.0, 0.0, 0.0], [0.0, 10.0 * 1e-3, 0.0]])     # strain 1e-3 along y
+    points = np.concatenate([pts, extra])
+    triangles = np.concatenate([tris[band], [[corner, len(pts), len(pts) + 1]]])
+    out = fissure_prone(points, triangles, np.concatenate([u, u_extra]), 2e-4)
+    assert out["fissure_prone_area_m2"] == pytest.approx(200.0 * 2000.0 + 50.0, rel=1e-12)
+    assert out["fissure_prone_length_m"] == pytest.approx(2000.0, rel=1e-12)
