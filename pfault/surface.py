@@ -52,7 +52,7 @@ class LandSurface:
         Collective."""
         if self.vertices is None:
             return {}, None
-        u = both.reshape(len(both), -1, 3)[self.take[:, 0], self.take[:, 1]]
+        u = both.reshape(len(both), both.shape[1] // 3, 3)[self.take[:, 0], self.take[:, 1]]
         parts = self.mpi.gather((self.rows, u), root=0)
         res = run_on_root(self.comm, self._step, parts)
         hz = self.mpi.bcast(res[0] if res is not None else None, root=0)

@@ -20,7 +20,9 @@ Problems (the error is relative, in the quantity named; ``h`` is the size measur
   slip) against (0, delta - L tau_L / G), over the exact slip; Lagrange faces hold it to round-off on every
   mesh, penalty faces err by their penetration p/k; h = sqrt(median fault face area).
 - ``wuxi``, ``queretaro``: config/wuxi.opts (largest fissure opening) and config/queretaro_calibrated.opts
-  (largest fault slip) against the finest mesh of the ladder (-pfault_mesh_size_factor); h = size factor.
+  (largest fault slip) against the finest mesh of the ladder (-pfault_mesh_size_factor); h = size factor. Their
+  other values (opening, slip, subsidence) relative to the reference's, or in metres where the reference's value is
+  zero in exact arithmetic (``case_errors``).
 
 Axes: the mesh ladder of every problem; the solvers (a direct and an iterative one: ``--fault-solvers`` for
 fault scenes, ``--elastic-solvers`` for the fault-free ones; names of pfault's solver files); the nonlinear
@@ -28,11 +30,14 @@ tolerance (-snes_rtol, ``--rtols`` next to the code default 1e-10) on the fault 
 multiples of E/h (``--penalty``: E the harmonic mean of the two sides' moduli, h = sqrt of the median
 fault face area of the Lagrange run on the same mesh) against the Lagrange multipliers.
 
+``--quick`` runs every problem and axis on the smallest meshes, on 1 rank (QUICK below): what the test suite runs.
+
 Runs one MPI job at a time and writes ``OUT/report.md`` (one table per problem, the cheapest setting for
-10 %, 5 % and 1 % error, the observed rates), ``OUT/error_vs_time.png`` (log-log, one curve per solver or
-method) and ``OUT/results.json``; each run keeps its output and log under ``OUT/<problem>/<run>/``. Wall
-times are end to end (mpirun, imports, meshing, solve, output), with the 1-minute load average during the
-run. The exit code is 1 if a run fails (exit code, divergence or unreadable output), else 0.
+10 %, 5 % and 1 % error, the observed rates, the case studies' effects and their cost), ``OUT/error_vs_time.png``
+(log-log, one curve per solver or method) and ``OUT/results.json``; each run keeps its output and log under
+``OUT/<problem>/<run>/``. Wall times are end to end (mpirun, imports, meshing, solve, output without the PNG
+figures), with the 1-minute load average during the run. The exit code is 1 if a run fails (exit code,
+divergence, unreadable output, or no error to measure), else 0.
 """
 
 from __future__ import annotations
@@ -61,15 +66,21 @@ PROBLEMS = ("mms", "oedometer", "theis", "penny", "two_blocks", "wuxi", "quereta
 
 # The ladders. Levels: n (mms, theis, penny, two_blocks), cells per 10 m of column (oedometer), size factor
 # (case studies; the last one is the reference). tol_levels/penalty_levels: the levels that get the
-# tolerance and penalty runs; iterative_levels: the levels the iterative solver runs (all when absent).
+# tolerance and penalty runs; iterative_levels: the levels the second solver (iterative, or MUMPS for Theis) runs
+# (all when absent); options: options added to every run of the problem.
+# QUICK is what the test suite runs (tests/verification/test_accuracy_cost.py): every problem and every axis, on
+# the smallest meshes that still give each series' rate (2-3 levels of the first solver) and the other axes at one
+# or two levels; the case studies at size factors 8 and 6 with the 10 years in 2 steps; on 1 rank. 26 runs, 28 CPU
+# seconds (docs/performance.md).
 QUICK = {
-    "mms": {"levels": (4, 8, 12)},
-    "oedometer": {"levels": (1, 2, 4, 6)},
-    "theis": {"levels": (12, 24, 48)},
-    "penny": {"levels": (4, 6, 8), "tol_levels": (6,)},
-    "two_blocks": {"levels": (2, 4, 8), "tol_levels": (4,), "penalty_levels": (2, 4, 8)},
-    "wuxi": {"levels": (4, 3, 2.5, 2), "tol_levels": (3,), "iterative_levels": ()},
-    "queretaro": {"levels": (4, 3, 2.5, 2), "tol_levels": (3,), "iterative_levels": (), "penalty_levels": ()},
+    "mms": {"levels": (4, 6, 8), "iterative_levels": (4,)},
+    "oedometer": {"levels": (1, 2), "iterative_levels": (1,)},
+    "theis": {"levels": (12, 24), "iterative_levels": (12,)},
+    "penny": {"levels": (4, 6), "tol_levels": (4,), "iterative_levels": (4,)},
+    "two_blocks": {"levels": (2, 4), "tol_levels": (2,), "iterative_levels": (2,), "penalty_levels": (2, 4)},
+    "wuxi": {"levels": (8, 6), "iterative_levels": (), "options": ("-pfault_time_steps", "2")},
+    "queretaro": {"levels": (8, 6), "iterative_levels": (), "penalty_levels": (),
+                  "options": ("-pfault_time_steps", "2")},
 }
 FULL = {
     "mms": {"levels": (4, 8, 12, 16, 24)},
@@ -102,6 +113,7 @@ class Row:
     load: float = float("nan")
     command: str = ""
     reference: bool = False
+    effects: dict = field(default_factory=dict)     # a pfault run's summary.json "effects", steps and solve time
 
 
 @dataclass(frozen=True)
@@ -130,8 +142,9 @@ def run_pfault(study, problem, name, scene, extra=()):
     path = os.path.join(rundir, "summary.json")
     if os.path.exists(path):
         os.remove(path)
-    done = run_command(["-m", "pfault", scene, "-pfault_output_dir", rundir, *extra], rundir, study.ranks,
-                       study.timeout)
+    # no PNG figures: drawing them is output, not the cost of an answer (seconds a run, more than a small solve)
+    done = run_command(["-m", "pfault", scene, "-pfault_output_dir", rundir, "-pfault_figures", "false", *extra],
+                       rundir, study.ranks, study.timeout)
     summary = read_summary(rundir)
     print(f"accuracy: {problem}/{name}: exit {done.code}, {done.wall:.1f} s (load {done.load:.1f})", flush=True)
     return done, summary, rundir
@@ -150,6 +163,8 @@ def pfault_row(problem, series, level, h, done, summary, error_fn):
     if summary is not None:
         row.unknowns = int(summary.get("dofs", 0))
         row.newton, row.krylov, row.lu = counts(summary)
+        row.effects = {"effects": summary.get("effects", {}), "solve_s": summary.get("wall_s", {}).get("solve"),
+                       "steps": len([r for r in summary["steps"] if not r.get("initial")])}
     if done.code != 0 or summary is None or not summary.get("converged", False):
         row.ok = False
         row.note = f"exit code {done.code}" + ("" if summary is None else
@@ -158,7 +173,7 @@ def pfault_row(problem, series, level, h, done, summary, error_fn):
     try:
         row.error, row.extra = error_fn(summary)
     except (OSError, KeyError, ValueError) as exc:       # unreadable output is a failed run
-        row.ok, row.note = False, f"output not readable: {exc}"
+        row.ok, row.note = False, f"no error measured: {exc}"
     return row
 
 
@@ -197,25 +212,31 @@ def elastic_solver_options(solver):
     return opts + (["-ksp_type", "preonly"] if solver == "mumps" else [])
 
 
+def solver_levels(solvers, ladder):
+    """(solver, level) pairs: the first solver on every level of the ladder, the others on its iterative_levels
+    (every level when absent)."""
+    return [(solver, level) for i, solver in enumerate(solvers) for level in ladder["levels"]
+            if i == 0 or level in ladder.get("iterative_levels", ladder["levels"])]
+
+
 def study_mms(study, ladder):
     rows = []
-    for solver in study.elastic_solvers:
-        for n in ladder["levels"]:
-            rundir = os.path.join(study.out, "mms", f"{solver}-n{n}")
-            done = run_command(["-m", "studies.accuracy", "mms-worker", n, *elastic_solver_options(solver)],
-                               rundir, study.ranks, study.timeout)
-            print(f"accuracy: mms/{solver}-n{n}: exit {done.code}, {done.wall:.1f} s (load {done.load:.1f})",
-                  flush=True)
-            row = Row("mms", solver, n, 1.0 / n, 3 * (n + 1) ** 3, None, wall_s=done.wall, load=done.load,
-                      command=done.command)
-            its = [int(m) for m in re.findall(r"Linear solve converged due to \S+ iterations (\d+)", done.output)]
-            found = [json.loads(s) for s in done.output.splitlines() if s.startswith("{")]
-            if done.code != 0 or not found or not its:
-                row.ok, row.note = False, f"exit code {done.code}" + ("" if its else ", linear solve not converged")
-            else:
-                row.error, row.extra = found[-1]["l2"], {"H1 error": found[-1]["h1"]}
-                row.krylov = its[-1]
-            rows.append(row)
+    for solver, n in solver_levels(study.elastic_solvers, ladder):
+        rundir = os.path.join(study.out, "mms", f"{solver}-n{n}")
+        done = run_command(["-m", "studies.accuracy", "mms-worker", n, *elastic_solver_options(solver)],
+                           rundir, study.ranks, study.timeout)
+        print(f"accuracy: mms/{solver}-n{n}: exit {done.code}, {done.wall:.1f} s (load {done.load:.1f})",
+              flush=True)
+        row = Row("mms", solver, n, 1.0 / n, 3 * (n + 1) ** 3, None, wall_s=done.wall, load=done.load,
+                  command=done.command)
+        its = [int(m) for m in re.findall(r"Linear solve converged due to \S+ iterations (\d+)", done.output)]
+        found = [json.loads(s) for s in done.output.splitlines() if s.startswith("{")]
+        if done.code != 0 or not found or not its:
+            row.ok, row.note = False, f"exit code {done.code}" + ("" if its else ", linear solve not converged")
+        else:
+            row.error, row.extra = found[-1]["l2"], {"H1 error": found[-1]["h1"]}
+            row.krylov = its[-1]
+        rows.append(row)
     return rows
 
 
@@ -224,14 +245,13 @@ def study_oedometer(study, ladder):
     young, nu, dp, height = 10e6, 0.25, 0.1e6, 100.0
     exact = (1 + nu) * (1 - 2 * nu) / (young * (1 - nu)) * dp * height
     rows = []
-    for solver in study.elastic_solvers:
-        for k in ladder["levels"]:
-            extra = ["-pfault_box_cells", f"{k},{k},{10 * k}", *solver_args(solver)]
-            done, summary, _ = run_pfault(study, "oedometer", f"{solver}-k{k}", "config/oedometer.opts", extra)
+    for solver, k in solver_levels(study.elastic_solvers, ladder):
+        extra = ["-pfault_box_cells", f"{k},{k},{10 * k}", *solver_args(solver)]
+        done, summary, _ = run_pfault(study, "oedometer", f"{solver}-k{k}", "config/oedometer.opts", extra)
 
-            def error(s):
-                return abs(s["max_subsidence_m"] - exact) / exact, {"settlement m": s["max_subsidence_m"]}
-            rows.append(pfault_row("oedometer", solver, k, height / (10 * k), done, summary, error))
+        def error(s):
+            return abs(s["max_subsidence_m"] - exact) / exact, {"settlement m": s["max_subsidence_m"]}
+        rows.append(pfault_row("oedometer", solver, k, height / (10 * k), done, summary, error))
     return rows
 
 
@@ -241,22 +261,22 @@ THEIS_SOLVERS = {"cg+hypre": [], "mumps": ["-flow_ksp_type", "gmres", "-flow_pc_
 
 def study_theis(study, ladder):
     rows = []
-    for solver, opts in THEIS_SOLVERS.items():
-        for n in ladder["levels"]:
-            rundir = os.path.join(study.out, "theis", f"{solver}-n{n}")
-            done = run_command([os.path.join(SCRIPTS, "theis.py"), n, *opts], rundir, study.ranks, study.timeout)
-            print(f"accuracy: theis/{solver}-n{n}: exit {done.code}, {done.wall:.1f} s (load {done.load:.1f})",
-                  flush=True)
-            row = Row("theis", solver, n, float("nan"), 2 * (n + 1) ** 2, None, wall_s=done.wall, load=done.load,
-                      command=done.command)
-            found = [json.loads(s) for s in done.output.splitlines() if s.startswith("{")]
-            if done.code != 0 or not found:
-                row.ok, row.note = False, f"exit code {done.code}"
-            else:
-                r = found[-1]
-                row.h, row.error, row.krylov = r["h_min"][0], r["max_rel_err"][0], r["ksp_its"][0]
-                row.extra = {"error at 100 m": r["rel_err_at"][0][2]}
-            rows.append(row)
+    for solver, n in solver_levels(list(THEIS_SOLVERS), ladder):
+        opts = THEIS_SOLVERS[solver]
+        rundir = os.path.join(study.out, "theis", f"{solver}-n{n}")
+        done = run_command([os.path.join(SCRIPTS, "theis.py"), n, *opts], rundir, study.ranks, study.timeout)
+        print(f"accuracy: theis/{solver}-n{n}: exit {done.code}, {done.wall:.1f} s (load {done.load:.1f})",
+              flush=True)
+        row = Row("theis", solver, n, float("nan"), 2 * (n + 1) ** 2, None, wall_s=done.wall, load=done.load,
+                  command=done.command)
+        found = [json.loads(s) for s in done.output.splitlines() if s.startswith("{")]
+        if done.code != 0 or not found:
+            row.ok, row.note = False, f"exit code {done.code}"
+        else:
+            r = found[-1]
+            row.h, row.error, row.krylov = r["h_min"][0], r["max_rel_err"][0], r["ksp_its"][0]
+            row.extra = {"error at 100 m": r["rel_err_at"][0][2]}
+        rows.append(row)
     return rows
 
 
@@ -371,6 +391,34 @@ CASES = {
     "queretaro": ("config/queretaro_calibrated.opts", "fault", "max_fault_slip_m", 2 / (1 / 15e6 + 1 / 4900e6)),
 }
 CASE_VALUES = {"max_fault_opening_m": "opening", "max_fault_slip_m": "slip", "max_subsidence_m": "subsidence"}
+# A case's opening, slip and subsidence are computed from its displacement field; a reference value below this share
+# of the reference's largest displacement is zero in exact arithmetic (no face open, none slid: pfault reports 0, or
+# the solver's tolerance, -snes_rtol 1e-10 by default), and an error relative to it would mean nothing.
+ZERO_SHARE = 1e-9
+
+
+def displacement_scale(summary):
+    """The largest displacement of a run (m): the scale its jumps and subsidence are computed from."""
+    return max(summary["max_subsidence_m"], summary["max_horizontal_displacement_m"])
+
+
+def is_zero(summary, key):
+    """Whether a run's value ``key`` is zero in exact arithmetic (ZERO_SHARE of its displacement scale)."""
+    return abs(summary[key]) <= ZERO_SHARE * displacement_scale(summary)
+
+
+def case_errors(s, ref):
+    """Each value of CASE_VALUES of run ``s`` against the reference run ``ref``: '<value> error', the relative
+    error, where the reference's value is not zero; '<value> difference m', the absolute difference in metres,
+    where it is (calibrated Queretaro opens no face); and '<value> m', the value itself."""
+    out = {}
+    for q, v in CASE_VALUES.items():
+        if is_zero(ref, q):
+            out[f"{v} difference m"] = abs(s[q] - ref[q])
+        else:
+            out[f"{v} error"] = abs(s[q] / ref[q] - 1.0)
+    out.update({f"{v} m": s[q] for q, v in CASE_VALUES.items()})
+    return out
 
 
 def case_runs(study, problem, ladder):
@@ -381,7 +429,7 @@ def case_runs(study, problem, ladder):
     order = [levels[-1]] + levels[:-1]
     runs, h_face = [], {}
     for f in order:
-        size = ["-pfault_mesh_size_factor", f"{f:g}"]
+        size = ["-pfault_mesh_size_factor", f"{f:g}", *ladder.get("options", ())]
         for series, extra in fault_series(study, ladder, f):
             name = f"{series.replace(', rtol ', '-rtol')}-f{f:g}"
             done, summary, rundir = run_pfault(study, problem, name, scene, [*size, *extra])
@@ -408,9 +456,10 @@ def study_case(study, ladder, problem):
         def error(s, f=f, series=series):
             if ref is None:
                 raise ValueError("the reference run failed")
-            extra = {f"{v} error": abs(s[q] / ref[q] - 1.0) for q, v in CASE_VALUES.items()}
-            extra.update({f"{v} m": s[q] for q, v in CASE_VALUES.items()})
-            if ", rtol " in series and f in base:
+            if is_zero(ref, quantity):      # the case's error measure needs a value to be relative to
+                raise ValueError(f"the reference's {quantity} is zero: no relative error")
+            extra = case_errors(s, ref)
+            if ", rtol " in series and f in base and not is_zero(base[f], quantity):
                 extra[f"vs rtol {DEFAULT_RTOL:g}"] = abs(s[quantity] / base[f][quantity] - 1.0)
             return abs(s[quantity] / ref[quantity] - 1.0), extra
         row = pfault_row(problem, series, f, f, done, summary, error)
@@ -471,6 +520,8 @@ def series_of(rows):
 # ------------------------------------------------------------------------------------------------------
 # report
 # ------------------------------------------------------------------------------------------------------
+CASE_COLUMNS = (" The opening, slip and subsidence columns: the value, and its relative error against the reference "
+                "or, where the reference's value is zero (no face open, none slid), the difference in metres.")
 ABOUT = {
     "mms": ("Manufactured solution (unit cube, fixed boundary)", "L2 error of the displacement / its L2 norm",
             "n", "h = 1/n; n^3 x 6 tetrahedra. P1 converges at rate 2 in L2 and 1 in H1."),
@@ -494,12 +545,14 @@ ABOUT = {
              "factor", "-pfault_mesh_size_factor; the finest factor of the ladder is the reference (error 0 by "
                        "construction, marked 'ref', not counted as a cheapest setting). Rates against the finest "
                        "mesh overstate the true rate at the level next to it. Penalty stiffnesses: E = 15.9 MPa "
-                       "(harmonic mean of 8 and 1200 MPa)."),
+                       "(harmonic mean of 8 and 1200 MPa)." + CASE_COLUMNS),
     "queretaro": ("Queretaro, calibrated pumping (config/queretaro_calibrated.opts)",
                   "largest fault slip against the finest mesh", "factor",
                   "-pfault_mesh_size_factor, with the groundwater-flow model; the finest factor is the reference. "
-                  "Penalty stiffnesses are multiples of E/h with E = 29.9 MPa (harmonic mean of 15 and 4900 MPa)."),
+                  "Penalty stiffnesses are multiples of E/h with E = 29.9 MPa (harmonic mean of 15 and 4900 MPa)."
+                  + CASE_COLUMNS),
 }
+
 
 
 def pct(v):
@@ -584,6 +637,31 @@ def rates_table(rates):
     return out
 
 
+def effects_rows(rows):
+    """The case studies' converged runs at the solvers' default tolerance, with the effects record of their
+    summary.json (pfault.effects: the set-up and per-step time of each effect its scene asks for)."""
+    return [r for r in rows if r.problem in CASES and r.ok and r.effects.get("effects")
+            and ", rtol " not in r.series and not r.series.startswith("penalty")]
+
+
+def effects_table(rows):
+    """What each effect a case study asks for costs, next to the run's solve time: set-up / per step (s), 'off'
+    for an effect the scene does not ask for (its fields, solvers and kernels are not built)."""
+    sel = effects_rows(rows)
+    names = [k for k in dict.fromkeys(k for r in sel for k in r.effects["effects"])
+             if any(r.effects["effects"][k]["on"] for r in sel)]
+    head = ["problem", "setting", "factor", "unknowns", "steps", "solve s",
+            *[f"{k} set-up / per step s" for k in names], "effects' share of the solve"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in sel:
+        eff = r.effects["effects"]
+        cells = [f"{eff[k]['setup_s']:.3g} / {eff[k]['per_step_s']:.3g}" if eff[k]["on"] else "off" for k in names]
+        share = sum(e["per_step_s"] for e in eff.values() if e["on"]) * r.effects["steps"] / r.effects["solve_s"]
+        out.append("| " + " | ".join([r.problem, r.series, f"{r.level:g}", f"{r.unknowns:,}", str(r.effects["steps"]),
+                                       f"{r.effects['solve_s']:.2f}", *cells, f"{100 * share:.3g} %"]) + " |")
+    return out
+
+
 def header(meta, rows):
     loads = [r.load for r in rows if np.isfinite(r.load)]
     failed = [r for r in rows if not r.ok]
@@ -594,9 +672,11 @@ def header(meta, rows):
         f"the runs was {min(loads):.1f} to {max(loads):.1f} (mean {np.mean(loads):.1f}); at 2.0 the two ranks had the "
         "machine to themselves, above it the wall times are inflated by about load/2. "
         f"Study run time {meta['study_s']:.0f} s, {len(rows)} runs, {len(failed)} failed.", "",
-        "Wall time: end to end (mpirun, Python imports, meshing except the penny crack's gmsh mesh, solve, output). "
+        "Wall time: end to end (mpirun, Python imports, meshing except the penny crack's gmsh mesh, solve, output "
+        "without the PNG figures). "
         "Newton: iterations summed over the steps (each step's elastic trial counts as one); Krylov: linear "
-        "iterations summed (1 per Newton iteration with MUMPS); LU: numerical factorisations. Errors are relative. "
+        "iterations summed (1 per Newton iteration with MUMPS); LU: numerical factorisations. Errors are relative "
+        "(a column named 'difference m' is an absolute difference in metres). "
         "Settings: the solver (`-pfault_solver`, MUMPS unless named), `rtol` = `-snes_rtol` (default 1e-10), "
         "`penalty m E/h` = penalty faces at m times E/h instead of Lagrange multipliers.", ""]
 
@@ -617,8 +697,19 @@ def write_report(path, rows, meta):
             "Newton tolerance's, not the mesh's) are left out.", ""]
     out += rates_table(rates)
     out += ["", "![error against wall time](error_vs_time.png)", ""]
+    if effects_rows(rows):
+        out += ["## Effects and their cost", "",
+                "The case studies' runs at the default tolerance: each effect's set-up time and time per step (the "
+                "maximum over ranks of the PETSc events its work runs in: pfault.effects), and the per-step work "
+                "of all of them over the steps' solve time (the rest is assembly and the linear solves of the "
+                "displacement and multiplier system).", ""]
+        out += effects_table(rows)
+        out.append("")
     for name, prows in by_problem.items():
         title, measure, _, text = ABOUT[name]
+        options = meta.get("ladders", {}).get(name, {}).get("options")
+        if options:
+            text += f" Every run of this study adds `{' '.join(options)}`."
         out += [f"## {title}", "", f"Error: {measure}. {text}", ""]
         out += problem_table(prows)
         out.append("")
@@ -680,9 +771,11 @@ def names(text):
 def parse(argv):
     p = argparse.ArgumentParser(prog="benchmarks/accuracy_cost.py",
                                 description="Accuracy against cost of pfault on problems with a known answer.")
-    p.add_argument("--quick", action="store_true", help="reduced ladders (under 5 minutes on 2 idle cores)")
+    p.add_argument("--quick", action="store_true", help="every problem and axis on the smallest meshes, on 1 rank "
+                   "(QUICK: 26 runs, about 30 s; what the test suite runs)")
     p.add_argument("--problems", type=names, default=PROBLEMS, help=f"comma list out of {','.join(PROBLEMS)}")
-    p.add_argument("--ranks", type=int, default=2)
+    p.add_argument("--ranks", type=int, default=None, help="MPI ranks of every run (default 2; 1 with --quick, whose "
+                   "small runs MPI start-up and synchronisation would dominate)")
     p.add_argument("--fault-solvers", type=names, default=("mumps", "iterative"),
                    help="solvers of the fault scenes (-pfault_solver NAME); the first one also runs the "
                         "tolerance ladder")
@@ -695,8 +788,10 @@ def parse(argv):
     unknown = set(args.problems) - set(PROBLEMS)
     if unknown:
         p.error(f"unknown problems {sorted(unknown)}")
+    if args.ranks is None:
+        args.ranks = 1 if args.quick else 2
     if args.rtols is None:
-        args.rtols = (1e-4, 1e-6) if args.quick else (1e-4, 1e-6, 1e-8)
+        args.rtols = (1e-4,) if args.quick else (1e-4, 1e-6, 1e-8)
     if args.penalty is None:
         args.penalty = (1.0, 100.0) if args.quick else (0.1, 1.0, 10.0, 100.0, 1000.0)
     return args
@@ -730,9 +825,10 @@ def main(argv=None):
         rows, meta = [Row(**r) for r in saved["rows"]], saved["meta"]
     else:
         rows, elapsed = run_study(args, study)
+        ladders = QUICK if args.quick else FULL
         meta = {"command": "benchmarks/accuracy_cost.py " + " ".join(argv), "git": git_hash(),
                 "date": time.strftime("%Y-%m-%d %H:%M"), "ranks": study.ranks, "cpus": os.cpu_count(),
-                "cpu": cpu_model(), "study_s": elapsed}
+                "cpu": cpu_model(), "study_s": elapsed, "ladders": {k: ladders[k] for k in args.problems}}
         with open(path, "w") as fh:
             json.dump({"meta": meta, "rows": [dataclasses.asdict(r) for r in rows]}, fh, indent=1)
     rates = write_report(os.path.join(study.out, "report.md"), rows, meta)

@@ -12,9 +12,11 @@ the contact monitor's lines for every case that failed or was cut into sub-steps
 ``DIR/newton_per_step.png`` are written. DIR is ``runs/hard_cases``. The exit code is 1 when a case did not
 converge or its invariant failed, 0 otherwise.
 
-``--quick`` runs the cases marked quick (one or more per kind of difficulty, all on box meshes); ``--cases``
-runs the named ones; either adds the runs their invariants compare with. ``--no-run`` rebuilds the report
-from the run directories already there.
+``--quick`` runs the cases marked quick (one per kind of difficulty, all on box meshes; some with fewer time steps,
+``quick_options``, which the report's table shows: the scenes are loaded proportionally, so their final state is the
+same) and is what the test suite runs (tests/verification/test_hard_cases.py: 11 runs, 82-177 s under a load
+average of 15 from other jobs on the 2-core reference machine, 55 CPU seconds); ``--cases`` runs the named ones; either adds the runs their invariants compare with.
+``--no-run`` rebuilds the report from the run directories already there. The runs draw no PNG figures.
 
 The scenes are the two-blocks scene (config/two_blocks.opts, analytic stick/slip), its horizontal version
 with two materials (config/hard/two_layers.opts), an earth fissure at a basin margin
@@ -30,12 +32,12 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
 
-from .run import REPO, command, cpu_model, read_summary, run_captured, run_logged, shown
+from .run import REPO, command, cpu_model, read_summary, run_logged, shown
 
 RUNS_DIR = os.path.join("runs", "hard_cases")
 EXIT_OK, EXIT_FAILED = 0, 1
@@ -55,6 +57,9 @@ FAULTS_DEEP = ("-pfault_box_fault_planes", "fa:x:175:0:150:-100:0,fb:y:175:0:150
 # size pfault's default penalty uses): 12.5 m x 10 m halves, and 6.25 m x 5 m halves at h/2
 E_OVER_H = 8.0e6 / math.sqrt(62.5)
 E_OVER_H_FINE = 8.0e6 / math.sqrt(15.625)
+# --quick runs the 10-step fissure box and two-faults scenes in 2 steps (their loading is proportional and their
+# faults cohesionless: the same final state), each case and the cases it compares with alike
+QUICK_STEPS = ("-pfault_time_steps", "2")
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -84,10 +89,18 @@ class Case:
     options: tuple = ()
     ranks: int = 2
     quick: bool = False
-    faces_per_rank: bool = False   # also count the fault faces each rank owns (the partition crosses the fault)
+    quick_options: tuple = ()      # added to the options in --quick (the cases it compares with must add the same)
 
     def args(self, out):
-        return [self.scene, *self.options, "-pfault_output_dir", out, "-pfault_contact_monitor"]
+        return [self.scene, *self.options, "-pfault_output_dir", out, "-pfault_contact_monitor", "-pfault_figures",
+                "false"]
+
+    def in_quick_form(self):
+        """The case as --quick runs it: its quick_options added, and said in its description."""
+        if not self.quick_options:
+            return self
+        return replace(self, options=self.options + self.quick_options,
+                       kind=f"{self.kind} (quick: `{' '.join(self.quick_options)}`)")
 
 
 @dataclass
@@ -308,9 +321,9 @@ def rank_agreement(ref, tol=1e-8):
     def evaluate(res, runs):
         a, b = res.fault().cell_data, runs[ref].fault().cell_data
         value = max(_rel(_jumps(res), _jumps(runs[ref])), _rel(a["traction_normal"], b["traction_normal"]))
-        faces = res.record.get("faces_per_rank")
+        faces = res.summary.get("partition", {}).get("fault_faces")      # summary.json: per rank
         split = faces is not None and sum(1 for n in faces if n > 0) > 1
-        note = f"fault faces per rank {faces}" if faces is not None else "fault faces per rank not counted"
+        note = f"fault faces per rank {faces}" if faces is not None else "fault faces per rank not reported"
         return Verdict(value, value <= tol and split, note)
     return Invariant(f"opening/slip and normal traction vs `{ref}` (relative difference); fault faces on more "
                      f"than one rank", f"<= {tol:g}", evaluate, (ref,))
@@ -406,11 +419,11 @@ def cases():
                         f"{'minus' if stiff == 'lower' else 'plus'} side)", TWO_LAYERS,
                         analytic_slip(exact),
                         _opt("-pfault_box_cells", "4,4,8", f"-pfault_material_{stiff}_young_modulus", "1e12"),
-                        quick=True))
+                        quick=stiff == "lower"))
     for phi in (1, 15, 45, 60):
         opts, exact = two_blocks_shear(phi, 0.6)
         out.append(Case(f"friction_{phi}", f"friction angle {phi} deg ({'stick' if exact == 0 else 'slip'})",
-                        TWO_BLOCKS, analytic_slip(exact, scale=0.6), opts, quick=phi in (1, 60)))
+                        TWO_BLOCKS, analytic_slip(exact, scale=0.6), opts, quick=phi == 1))
     # the pulls of CYCLE stretch the glued blocks by up to ~55 kPa: c = 10 kPa opens them at 17 kPa
     out.append(Case("cohesion_cutoff", "c = 10 kPa: pushed, pulled, pushed, pulled; the faces open at the apex of "
                     "the cone, c/tan(phi) = 17 kPa of tension, and carry it while open", TWO_BLOCKS,
@@ -418,13 +431,14 @@ def cases():
                     quick=True))
     out += _step_cases()
     out.append(Case("cycle_two_blocks", "pressed, pulled open, pressed shut, reopened (c = 0)", TWO_BLOCKS,
-                    cycle_opening(), CYCLE, quick=True))
+                    cycle_opening(), CYCLE))
     out.append(Case("cycle_wuxi_f3", "Wuxi (size factor 3): 10 yr drawdown, 10 yr recovery, 10 yr drawdown",
                     "config/wuxi_recovery.opts", reopening(10, 20, 30), WUXI_CYCLE))
     out.append(Case("faults_to_fixed_bottom", "two faults through the whole depth: reach the fixed bottom, the "
-                    "rollers and the land surface", TWO_FAULTS, xy_symmetry(), FAULTS_DEEP, quick=True))
+                    "rollers and the land surface", TWO_FAULTS, xy_symmetry(), FAULTS_DEEP, quick=True,
+                    quick_options=QUICK_STEPS))
     out.append(Case("zero_strength_fissure", "fissure box: no geostatic stress, c = 0 (stick, slip and open "
-                    "faces)", FISSURE, contact_conditions(0.0, 30.0), quick=True))
+                    "faces)", FISSURE, contact_conditions(0.0, 30.0), quick=True, quick_options=QUICK_STEPS))
     out.append(Case("zero_strength_queretaro_f3", "calibrated Queretaro (size factor 3, flow) without "
                     "geostatic stress", "config/queretaro_calibrated.opts", contact_conditions(0.0, 30.0),
                     _opt("-pfault_mesh_size_factor", "3", "-pfault_geostatic", "false")))
@@ -432,18 +446,19 @@ def cases():
     out += _mesh_cases()
     out += _junction_cases()
     out.append(Case("partition_1_rank", "`faults_to_fixed_bottom` on 1 rank (reference)", TWO_FAULTS, converges(),
-                    FAULTS_DEEP, ranks=1, quick=True))
+                    FAULTS_DEEP, ranks=1))
     out.append(Case("partition_3_ranks", "`faults_to_fixed_bottom` on 3 ranks (oversubscribed), both faults "
-                    "split between ranks", TWO_FAULTS, rank_agreement("partition_1_rank"), FAULTS_DEEP, ranks=3,
-                    quick=True, faces_per_rank=True))
+                    "split between ranks", TWO_FAULTS, rank_agreement("partition_1_rank"), FAULTS_DEEP, ranks=3))
     return out
 
 
 def _step_cases():
     steps = [Case("proportional_1_step", "fissure box, the 10-year drawdown in 1 step", FISSURE, converges(),
                   _opt("-pfault_time_steps", "1"), quick=True),
+             Case("proportional_4_steps", "fissure box, the same in 4 steps", FISSURE,
+                  path_independence("proportional_1_step"), _opt("-pfault_time_steps", "4"), quick=True),
              Case("proportional_40_steps", "fissure box, the same in 40 steps", FISSURE,
-                  path_independence("proportional_1_step"), _opt("-pfault_time_steps", "40"), quick=True),
+                  path_independence("proportional_1_step"), _opt("-pfault_time_steps", "40")),
              Case("proportional_1_step_h2", "fissure box at h/2 (61,440 tets), 1 step", FISSURE, converges(),
                   FISSURE_FINE + _opt("-pfault_time_steps", "1")),
              Case("proportional_10_steps_h2", "fissure box at h/2, 10 steps", FISSURE,
@@ -458,12 +473,11 @@ def _penalty_cases():
     for m in (1e-2, 1.0, 1e2):
         out.append(Case(name(m), f"fissure box, penalty k = {m:g} E/h = {m * E_OVER_H:.3g} Pa/m", FISSURE,
                         penalty_vs_lagrange(lagrange, [name(s) for s in (1e-2, 1.0) if s < m]),
-                        penalty("fissure", m * E_OVER_H), quick=m == 1e-2))
+                        penalty("fissure", m * E_OVER_H)))
     out.append(Case(name(1e3), f"fissure box, penalty k = 1000 E/h = {1e3 * E_OVER_H:.3g} Pa/m", FISSURE,
-                    penalty_gap(lagrange), penalty("fissure", 1e3 * E_OVER_H)))
+                    penalty_gap(lagrange), penalty("fissure", 1e3 * E_OVER_H), quick=True, quick_options=QUICK_STEPS))
     out.append(Case(name(1e4), f"fissure box, penalty k = 10000 E/h = {1e4 * E_OVER_H:.3g} Pa/m", FISSURE,
-                    penalty_rate_in_k(lagrange, (name(1e2), name(1e3)), 10.0), penalty("fissure", 1e4 * E_OVER_H),
-                    quick=True))
+                    penalty_rate_in_k(lagrange, (name(1e2), name(1e3)), 10.0), penalty("fissure", 1e4 * E_OVER_H)))
     out.append(Case("penalty_100_E_over_h_h2", f"fissure box at h/2, penalty k = 100 E/h = "
                     f"{100 * E_OVER_H_FINE:.3g} Pa/m", FISSURE, penalty_gap("proportional_10_steps_h2"),
                     FISSURE_FINE + penalty("fissure", 100 * E_OVER_H_FINE)))
@@ -489,21 +503,21 @@ T_JUNCTION_SWAPPED = ("-pfault_box_fault_planes", "fa:x:175:0:175:-40:0,fb:y:175
 
 def _junction_cases():
     return [Case("two_faults_apart", "two faults ending one cell (25 m) apart at a basin corner", TWO_FAULTS,
-                 xy_symmetry(), quick=True),
+                 xy_symmetry()),
             Case("two_faults_crossing_1_rank", "`two_faults_crossing` on 1 rank (reference)", TWO_FAULTS,
-                 converges(), CROSSING, ranks=1, quick=True),
+                 converges(), CROSSING, ranks=1, quick=True, quick_options=QUICK_STEPS),
             Case("two_faults_crossing", "two fault planes crossing (X junction: 4 pieces at each junction vertex)",
                  TWO_FAULTS, both(xy_symmetry(), rank_agreement("two_faults_crossing_1_rank")), CROSSING,
-                 quick=True, faces_per_rank=True),
+                 quick=True, quick_options=QUICK_STEPS),
             Case("two_faults_t_junction_swapped", "`two_faults_t_junction` with the faults' roles swapped: fb "
-                 "through, fa ending on it (reference)", TWO_FAULTS, converges(), T_JUNCTION_SWAPPED, quick=True),
+                 "through, fa ending on it (reference)", TWO_FAULTS, converges(), T_JUNCTION_SWAPPED),
             Case("two_faults_t_junction", "fb ending on fa (T junction: 3 pieces at each junction vertex)",
-                 TWO_FAULTS, xy_swapped("two_faults_t_junction_swapped"), T_JUNCTION, quick=True)]
+                 TWO_FAULTS, xy_swapped("two_faults_t_junction_swapped"), T_JUNCTION)]
 
 
 def select(all_cases, quick=False, names=None):
     """The cases to run: all, the quick ones or the named ones, plus the runs their invariants compare with
-    (in report order)."""
+    (in report order); the quick ones each in its quick form (Case.in_quick_form)."""
     by_name = {c.name: c for c in all_cases}
     if names:
         unknown = [n for n in names if n not in by_name]
@@ -518,7 +532,15 @@ def select(all_cases, quick=False, names=None):
             if dep not in want:
                 want.add(dep)
                 todo.append(dep)
-    return [c for c in all_cases if c.name in want]
+    chosen = [c for c in all_cases if c.name in want]
+    if not quick or names:          # named cases run as they are
+        return chosen
+    for c in chosen:        # a quick form compares with runs made as it is
+        differ = [d for d in c.invariant.needs if by_name[d].quick_options != c.quick_options]
+        if differ:
+            raise SystemExit(f"hard cases: {c.name} has quick options {c.quick_options} but {', '.join(differ)} "
+                             "another: give them the same")
+    return [c.in_quick_form() for c in chosen]
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -539,39 +561,10 @@ def run_case(case, runs_dir, timeout=1800.0):
     rec = {"case": case.name, "command": done.command, "ranks": case.ranks, "exit_code": rc,
            "wall_end_to_end_s": done.wall, "load_avg_1min_after": os.getloadavg()[0],
            "date": time.strftime("%Y-%m-%d %H:%M")}
-    if case.faces_per_rank:
-        rec["faces_per_rank"] = count_faces_per_rank(case)
     with open(os.path.join(REPO, out, "hardcase.json"), "w") as fh:
         json.dump(rec, fh, indent=2)
     print(f"hard cases: {case.name}: exit {rc} in {rec['wall_end_to_end_s']:.1f} s", flush=True)
     return rec
-
-
-def count_faces_per_rank(case):
-    """Fault faces each rank owns in the case's scene and rank count (set-up only, no solve)."""
-    proc = run_captured(["-m", "studies.hard_cases", "--faces-per-rank", case.scene, *case.options], case.ranks,
-                        timeout=600)
-    lines = proc.stdout.strip().splitlines()
-    return json.loads(lines[-1])["faces_per_rank"] if proc.returncode == 0 and lines else None
-
-
-def _faces_per_rank_main(argv):
-    """``mpirun -n N python -m studies.hard_cases --faces-per-rank SCENE [options]``: prints
-    {"faces_per_rank": [...]} (a face belongs to the rank owning its minus cell)."""
-    scene, rest = argv[0], list(argv[1:])
-    import petsc4py
-    from pfault.optionsfile import petsc_arguments
-    petsc4py.init([sys.argv[0]] + petsc_arguments(scene, rest))
-    from petsc4py import PETSc
-    from pfault.simulation import Simulation
-    sim = Simulation(scene, [scene] + rest)
-    try:
-        counts = [int(c) for c in PETSc.COMM_WORLD.tompi4py().allgather(len(sim.model.faces.face))]
-    finally:
-        sim.destroy()
-    if PETSc.COMM_WORLD.rank == 0:
-        print(json.dumps({"faces_per_rank": counts}))
-    return 0
 
 
 def load(case, runs_dir):
@@ -769,7 +762,8 @@ def write_report(results, selected, meta, path):
 # ------------------------------------------------------------------------------------------------------
 def _parser():
     p = argparse.ArgumentParser(prog="benchmarks/hard_cases.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="only the cases marked quick (under 5 minutes on 2 cores)")
+    p.add_argument("--quick", action="store_true", help="the cases marked quick in their quick form (11 runs, "
+                   "55 CPU seconds; what the test suite runs)")
     p.add_argument("--cases", default="", help="comma-separated case names (default: all)")
     p.add_argument("--no-run", action="store_true", help="report on the runs already in the runs directory")
     p.add_argument("--runs-dir", default=RUNS_DIR, help=f"output directory (default {RUNS_DIR})")
@@ -780,8 +774,6 @@ def _parser():
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["--faces-per-rank"]:
-        return _faces_per_rank_main(argv[1:])
     args = _parser().parse_args(argv)
     all_cases = cases()
     if args.list:

@@ -167,6 +167,8 @@ class Writer:
         ``directory`` (known to every rank)."""
         data, attrs, texts = local_state(model, state, step, t, records)
         texts.update(self.texts)
+        agreed = parallel.agree_shapes(self.mpi, {name: values for name, (_, values) in data.items()})
+        data = {name: (kind, agreed[name]) for name, (kind, _) in data.items()}
         path = os.path.join(directory, NAME)
         if self.parallel:
             self._write_parallel(path, data, attrs, texts)
@@ -179,7 +181,7 @@ class Writer:
         """{dataset: array in the serial numbering} on rank 0, None elsewhere."""
         out = {}
         for name, (kind, values) in data.items():
-            columns = values.reshape(len(values), -1)
+            columns = parallel.as_columns(values)
             if kind == VERTEX:
                 whole = distributed.gather_vertex_values(self.mesh, columns)
             elif kind == CELL:

@@ -622,13 +622,15 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
 def _fissure_prone_outline(ax: Any, run_dir: str, pts: np.ndarray, tris: np.ndarray, strain: np.ndarray, t: float,
                            km: float) -> None:
     """The border of the triangles whose strain exceeds summary.json's hazard_strain_threshold, labelled with
-    the fissure-prone length of the step at time t (pfault.io.hazard); nothing for a run without them."""
+    the fissure-prone length of the step at time t (pfault.io.hazard); nothing for a run without them. A fault's
+    trace inside the zone is no border: its two sides' copies of a vertex are one point (hazard.same_place)."""
     from matplotlib.collections import LineCollection
+    from .hazard import same_place
     summary = read_summary(run_dir)
     threshold = summary.get("hazard_strain_threshold")
     if threshold is None or not np.any(strain > threshold):
         return
-    edges = np.sort(tris[strain > threshold][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = np.sort(same_place(pts)[tris[strain > threshold]][:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     edges, count = np.unique(edges, axis=0, return_counts=True)
     border = pts[edges[count == 1]][:, :, :2] * km
     rec = [r for r in summary.get("steps", []) if abs(r.get("time_s", -1.0) - t) <= 1e-9 * max(abs(t), 1.0)]

@@ -14,7 +14,10 @@ largest) carry zero. Rank 0, on the output mesh (pfault.simulation), NumPy only.
 The fissure-prone length (``fissure_prone``) sums, over the connected zones of triangles whose horizontal strain
 exceeds ``-pfault_hazard_strain_threshold``, the length of each zone along the direction a tension fissure would
 run there (normal to the largest principal strain, averaged over the zone): the length of the land-surface trace a
-fissure could take, which a plan's pumping lengthens or shortens.
+fissure could take, which a plan's pumping lengthens or shortens. A zone is the triangles that touch one another
+(share a point) on the land surface as it lies, so the two sides of a split fault, whose vertices the output mesh
+holds twice (one copy per side, at the same place), join along its trace: a stretch of land surface strained on both
+sides of a fault is one zone, counted once.
 """
 
 from __future__ import annotations
@@ -85,16 +88,23 @@ def surface_fields(points: np.ndarray, triangles: np.ndarray, u: np.ndarray) -> 
     return {"horizontal_strain": np.where(ok, strain, 0.0), "angular_distortion": np.where(ok, distortion, 0.0)}
 
 
+def same_place(points: np.ndarray) -> np.ndarray:
+    """For every point, the first point at the same place (itself if none before it): the copies of a split fault
+    vertex, one per side in the output mesh (pfault.mesh.fault.vertex_copies), are one point of the land surface."""
+    _, first, inv = np.unique(points, axis=0, return_index=True, return_inverse=True)
+    return first[inv.ravel()]
+
+
 def _zones(triangles: np.ndarray) -> np.ndarray:
-    """Label (0..n-1) of the edge-connected zone of every triangle."""
+    """Label (0..n-1) of the connected zone of every triangle: triangles sharing a point id are one zone (a
+    triangle that touches a zone at a corner belongs to that stretch of land surface, and is not a fissure of its
+    own)."""
     m = len(triangles)
-    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    owner = np.repeat(np.arange(m), 3)
-    _, inv, count = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.ravel()
-    order = np.argsort(inv, kind="stable")
-    shared = count[inv[order]] == 2
-    pairs = owner[order][shared].reshape(-1, 2)        # the two triangles of every shared edge
+    points, owner = triangles.ravel(), np.repeat(np.arange(m), 3)
+    order = np.argsort(points, kind="stable")
+    point, tri = points[order], owner[order]
+    same = point[1:] == point[:-1]
+    pairs = np.column_stack([tri[:-1][same], tri[1:][same]])     # triangles in turn around every shared point
     label = np.arange(m)
     while True:
         low = np.minimum(label[pairs[:, 0]], label[pairs[:, 1]])
@@ -110,8 +120,9 @@ def _zones(triangles: np.ndarray) -> np.ndarray:
 
 def fissure_prone(points: np.ndarray, triangles: np.ndarray, u: np.ndarray, threshold: float) -> dict[str, float]:
     """Fissure-prone length and area of the land surface (module docstring): the triangles whose horizontal
-    strain exceeds ``threshold``, grouped in edge-connected zones; per zone the union of the triangles' extents
-    along the zone's mean fissure direction (area-weighted mean of the doubled angle), summed over the zones."""
+    strain exceeds ``threshold``, grouped in zones of triangles that touch at a point (``same_place``: across a
+    split fault's trace too); per zone the union of the triangles' extents along the zone's mean fissure direction
+    (area-weighted mean of the doubled angle), summed over the zones."""
     ok, exx, eyy, exy, _, _ = _strain(points, triangles, u)
     strain = 0.5 * (exx + eyy) + np.sqrt(0.25 * (exx - eyy) ** 2 + exy ** 2)
     prone = ok & (strain > threshold)
@@ -121,7 +132,7 @@ def fissure_prone(points: np.ndarray, triangles: np.ndarray, u: np.ndarray, thre
     tri = triangles[prone]
     x = points[tri][:, :, :2]
     area = 0.5 * np.abs(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]))
-    zone = _zones(tri)
+    zone = _zones(same_place(points)[tri])
     two_theta = np.arctan2(2.0 * exy[prone], exx[prone] - eyy[prone])   # twice the tension direction's angle
     c = np.bincount(zone, area * np.cos(two_theta))
     s = np.bincount(zone, area * np.sin(two_theta))

@@ -57,6 +57,34 @@ def available(comm: Any) -> bool:
     return mpi.allreduce(ok, op=MPI.LAND)
 
 
+def as_columns(values: np.ndarray) -> np.ndarray:
+    """(n, ...) values per row as (n, k) columns, k the product of the trailing dimensions: also for n = 0, a
+    rank that holds no row (``reshape(n, -1)`` cannot tell k from an empty array)."""
+    values = np.asarray(values)
+    return values.reshape(len(values), int(np.prod(values.shape[1:], dtype=np.int64)))
+
+
+def agree_shapes(comm: MPI.Comm, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``arrays`` ({name: (rows, ...) values}, the same names on every rank) with each empty one given the
+    trailing shape and dtype of the ranks that hold rows of it. A rank that owns no vertex, cell or fault face
+    computes its values from empty arrays, whose trailing shape or dtype may not be the others' (``np.zeros(0)``
+    is (0,) float where the others have (n, 3) integers); the dataset a name becomes is made from its shape and
+    dtype by collective calls, which must be the same on every rank. Ranks holding rows that disagree are a bug
+    (RuntimeError on every rank). Collective (mpi4py ``comm``)."""
+    mine = {k: (len(v) > 0, tuple(np.shape(v)[1:]), np.asarray(v).dtype.str) for k, v in arrays.items()}
+    every = comm.allgather(mine)
+    out = {}
+    for key, values in arrays.items():
+        held = {d[key][1:] for d in every if d[key][0]} or {every[0][key][1:]}
+        if len(held) > 1:
+            raise RuntimeError(f"{key}: the ranks' values differ in shape or type: {sorted(held)}")
+        shape, dtype = held.pop()
+        values = np.asarray(values)
+        agreed = values.shape[1:] == shape and values.dtype.str == dtype
+        out[key] = values if agreed else np.zeros((0,) + shape, dtype=np.dtype(dtype))
+    return out
+
+
 class Rows:
     """The rows of a dataset of ``total`` rows in the serial numbering that this rank holds values of: ``rows``
     in increasing order, ``take`` the index of each in this rank's array of values (``source``; default: the

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import run_on_root
 from ..mesh import distributed
 from ..mesh.fault import copy_index, vertex_copies
-from .parallel import ParallelSeries, Rows
+from .parallel import ParallelSeries, Rows, agree_shapes, as_columns
 
 if TYPE_CHECKING:
     from ..mesh.distributed import LocalMesh
@@ -48,7 +48,7 @@ class StepOutput:
         n = mesh.n_global_vertices
         self.vert_sides = np.ones(n, np.int64) if vert_sides is None else np.asarray(vert_sides, dtype=np.int64)
         self.copies, self.faces = vertex_copies(self.vert_sides), faces
-        self.parallel = bool(parallel)
+        self.parallel, self.max_sides = bool(parallel), int(max_sides)
         self.n_faces = len(fault_id)
         self.series = {}
         if not parallel:
@@ -76,10 +76,13 @@ class StepOutput:
         """Write one step (LocalStep ``values``, and the land surface's step ``surface``, pfault.surface.SurfaceStep,
         on rank 0: None elsewhere or without a land surface)."""
         write = self._write_parallel if self.parallel else self._write_gathered
+        values = LocalStep(values.displacement, values.head, agree_shapes(self.mpi, values.cells),
+                           None if values.faults is None else agree_shapes(self.mpi, values.faults))
         write(step, t, values, surface)
 
     def _write_parallel(self, step, t, values, surface):
-        disp = values.displacement.reshape(len(values.displacement), -1, 3).transpose(1, 0, 2).reshape(-1, 3)
+        nv = len(values.displacement)
+        disp = values.displacement.reshape(nv, self.max_sides, 3).transpose(1, 0, 2).reshape(-1, 3)
         point = {"displacement": disp}
         if values.head is not None:
             point["head_change"] = np.tile(values.head, len(disp) // max(len(values.head), 1))
@@ -101,13 +104,13 @@ class StepOutput:
         both = distributed.gather_vertex_values(mesh, values.displacement)
         head = None if values.head is None else distributed.gather_vertex_values(mesh, values.head.reshape(-1, 1))
         names = list(values.cells)
-        columns = [values.cells[k].reshape(len(mesh.cells), -1) for k in names]
+        columns = [as_columns(values.cells[k]) for k in names]
         stacked = distributed.gather_cell_values(mesh, np.concatenate(columns, axis=1))
         faults = None if values.faults is None else self.mpi.gather((self.faces, values.faults), root=0)
 
         def write():
             vertex, piece = self.copies
-            u = np.concatenate([both[:, :3], both.reshape(len(both), -1, 3)[vertex, piece]])
+            u = np.concatenate([both[:, :3], both.reshape(len(both), self.max_sides, 3)[vertex, piece]])
             point_data = {"displacement": u}
             if head is not None:
                 point_data["head_change"] = np.concatenate([head[:, 0], head[vertex, 0]])

@@ -11,6 +11,8 @@ from __future__ import annotations
 import sys
 from typing import Any
 
+import numpy as np
+
 from .hazard import summary_maxima
 
 
@@ -25,6 +27,7 @@ class RunSummary:
         # keys the run adds (the pore-pressure source's coverage, a restart's data files); a dict merges into the
         # key of that name
         self.extra: dict[str, Any] = {}
+        self.partition = partition(model)
 
     def compose(self, steps: list, converged: bool, stop: str | None, running: bool = False) -> dict:
         """The summary of the step records ``steps`` (collective: the memory peak and the costs are every
@@ -46,6 +49,7 @@ class RunSummary:
             "max_fault_opening_m": max([r.get("max_fault_opening_m", 0.0) for r in last], default=0.0),
             "max_fault_slip_m": max([r.get("max_fault_slip_m", 0.0) for r in last], default=0.0),
             "memory_peak_mib": memory_peak_mib(m.comm),
+            "partition": self.partition,
             "converged": bool(converged),
             "effects": self.costs.record(m.scene.effects, len([r for r in steps if not r.get("initial")])),
             # a run in progress, or one killed before it could say how it ended, reads running: true
@@ -77,6 +81,15 @@ class RunSummary:
                 "newton_its": int(newton), "ksp_its": int(krylov),
                 "ksp_per_newton": krylov / newton if newton else 0.0,
                 "max_ksp_per_newton": max([r.get("ksp_per_newton", 0.0) for r in steps], default=0.0)}
+
+
+def partition(model: Any) -> dict:
+    """What each rank owns, in rank order: its cells, vertices and fault faces (a rank may own none on a small
+    mesh; the results do not depend on it). Collective."""
+    mesh = model.mesh
+    nf = len(model.faces.face)
+    counts = model.comm.tompi4py().allgather((len(mesh.cells), int(np.count_nonzero(mesh.vert_owned)), int(nf)))
+    return {key: [int(c[k]) for c in counts] for k, key in enumerate(("cells", "vertices", "fault_faces"))}
 
 
 def memory_peak_mib(comm: Any) -> list:

@@ -111,6 +111,18 @@ def test_wuxi_fissure_opens_near_the_surface(wuxi):
     assert surf_open >= opening.max(), "the nodal opening at the surface bounds the face averages"
 
 
+def test_wuxi_fissure_prone_length_is_the_fissure_trace(wuxi):
+    """The strained band runs along the fissure's 5 km trace on both of its sides (the open fissure splits the
+    land surface there): one stretch of land surface, counted once. Measured at size factor 4: 5001.2 m, the band's
+    extent along its mean fissure direction (10,000 m when the sides were counted apart)."""
+    run_dir, summary = wuxi[2]
+    assert summary["max_fissure_prone_length_m"] == pytest.approx(5000.0, rel=2e-3)
+    surf = fg.read_surface(run_dir)
+    prone = surf.cell_data["horizontal_strain"] > summary["hazard_strain_threshold"]
+    x = surf.points[surf.cells[prone]][:, :, 0]
+    assert (x.min() < WUXI_CREST_X - 1.0) and (x.max() > WUXI_CREST_X + 1.0)    # on both sides of the trace
+
+
 def test_wuxi_slip_much_smaller_than_opening(wuxi):
     _, summary = wuxi[2]
     assert summary["max_fault_slip_m"] < 0.25 * summary["max_fault_opening_m"]
