@@ -237,7 +237,7 @@ def test_bad_hdf5_and_other_files(tmp_path):
     assert message(h5("pts.h5", x=[0.0, 1.0, 0.0, 1.0], y=[0.0, 0.0, 1.0, 0.0], E=[1.0, 2.0, 3.0, 4.0])) == (
         "the point x = 1, y = 0 is given twice (entries 1 and 3) with different values of E (2 and 4); give each "
         "point once (remove the extra entries)")
-    assert message(str(tmp_path)) == "is a directory; give the path of a CSV, HDF5 or NetCDF file in it"
+    assert message(str(tmp_path)) == "is a directory, not a file; give the path of a CSV, HDF5 or NetCDF file"
     (tmp_path / "map.tif").write_bytes(b"II*\x00" + bytes(100))
     assert message(str(tmp_path / "map.tif")) == (
         "a (Geo)TIFF, which pfault does not read; convert it to NetCDF (gdal_translate -of netCDF in.tif out.nc) "
