@@ -69,10 +69,14 @@ SPECS = [
        "fault at size factor 1 (times -pfault_mesh_size_factor); 52 m gives the paper's 8,074 fault faces, the "
        "layers' 50/7 m elements as wide as high beside the fault, which the fault's slip needs to converge "
        "(docs/verification.md, calibrated Queretaro)"),
+    _s("pfault_queretaro_layer_thickness", "quantity", None, "m", "queretaro: height of the mesh's horizontal "
+       "layers of elements at size factor 1 (times -pfault_mesh_size_factor), in [0.1, 50] m, rounded to whole "
+       "layers in the clay and in the sand (default 50/7 m: 3 layers in the 20 m clay, 4 in the 30 m sand)"),
     _s("pfault_queretaro_surface_size", "quantity", None, "m", "queretaro: element height at the land surface "
-       "at size factor 1 (times -pfault_mesh_size_factor), in [0.1, 50/7] m; the layers below grow by 0.5 m per "
-       "metre of depth to the layers' 50/7 m: thin rows of fault faces under the land surface, which the fault's "
-       "answer needs to converge (docs/verification.md, calibrated Queretaro; default: uniform 50/7 m layers)"),
+       "at size factor 1 (times -pfault_mesh_size_factor), in [0.1, the layer thickness] m; the layers below grow "
+       "by 0.5 m per metre of depth to -pfault_queretaro_layer_thickness: thin rows of fault faces under the land "
+       "surface, which the fault's answer needs to converge (docs/verification.md, calibrated Queretaro; default: "
+       "uniform layers)"),
     _s("pfault_queretaro_wells", "list", "12000,12000,12000,15000,12000,18000", "m", "queretaro: well "
        "positions x1,y1,x2,y2,... in the aquifer; the mesh is refined around them (default: -pfault_flow_wells "
        "when given)"),

@@ -142,7 +142,8 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
     if settings.mesh_generator == "queretaro":
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_queretaro_{key}") for key in ("fault_x", "clay_thickness", "wells",
-                                                                             "fault_size", "surface_size")}
+                                                                             "fault_size", "surface_size",
+                                                                             "layer_thickness")}
         if not reader.has("pfault_queretaro_wells") and reader.has("pfault_flow_wells"):
             # refine where the flow model pumps
             params["wells"] = reader.get("pfault_flow_wells")
