@@ -111,14 +111,22 @@ SPECS = [
     # faults
     _s("pfault_faults", "names", "", "", "physical surfaces that are faults (split, with contact and friction)"),
     _s("pfault_fault_<fault>_cohesion", "quantity", 0.0, "Pa", "cohesion c of the Mohr-Coulomb criterion (a "
-       "face opens at the cone's apex, a tensile effective normal traction c / tan(phi))"),
+       "face opens at the cone's apex, a tensile effective normal traction c / tan(phi), unless "
+       "-pfault_fault_<fault>_tension_cutoff zero)"),
     _s("pfault_fault_<fault>_friction_angle", "quantity", 30.0, "degree", "friction angle phi"),
     _s("pfault_fault_<fault>_tensile_strength", "quantity", 0.0, "Pa", "tensile strength T of the intact surface: "
        "with T > 0 the fault is a candidate surface whose faces stay glued until the effective normal traction "
        "exceeds min(T, c / tan(phi)) or the shear c - t_N tan(phi), then break for good (0: a pre-existing "
        "fault, every face broken from the start)"),
+    _s("pfault_fault_<fault>_tension_cutoff", "choice", "apex", "", "where the fault's law opens: apex, at the "
+       "Mohr-Coulomb cone's apex, a tensile effective normal traction c / tan(phi) (the shear strength falls to zero "
+       "as the face opens); zero, at t_N = 0 (a fault that carries no tension: a cohesive face opens as soon as its "
+       "effective normal traction is tensile, its shear strength dropping from c to 0, which Newton converges on "
+       "less easily). A candidate surface's intact faces keep min(T, c / tan(phi)); this sets the law of its "
+       "broken faces (cohesion c_r)", choices=("apex", "zero")),
     _s("pfault_fault_<fault>_residual_cohesion", "quantity", 0.0, "Pa", "cohesion of a broken face of a "
-       "candidate surface (at most the cohesion; a broken face opens at c_r / tan(phi))"),
+       "candidate surface (at most the cohesion; a broken face opens at c_r / tan(phi), or at zero with "
+       "-pfault_fault_<fault>_tension_cutoff zero)"),
     _s("pfault_fault_<fault>_method", "choice", "lagrange", "", "contact enforcement",
        choices=("lagrange", "penalty")),
     _s("pfault_fault_<fault>_penalty_normal", "quantity", 0.0, "Pa/m", "normal penalty stiffness (0: E/h of "

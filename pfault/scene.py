@@ -305,6 +305,7 @@ def read_faults(reader: OptionReader, surface_names: Collection[str]) -> list[Fa
         method = reader.get(p + "method")
         faults.append(FaultSettings(name=name, cohesion=c, friction_angle=phi, method=method,
                                     tensile_strength=strength, residual_cohesion=residual,
+                                    tension_cutoff=reader.get(p + "tension_cutoff"),
                                     penalty_normal=reader.get(p + "penalty_normal") if method == "penalty" else 0.0,
                                     penalty_tangential=reader.get(p + "penalty_tangential")
                                     if method == "penalty" else 0.0))

@@ -86,7 +86,7 @@ class FaultInterface:
     def _laws(self, face_young: np.ndarray) -> tuple[ct.FaceLaw, ct.FaceLaw]:
         """Per-face law parameters: the Lagrange law's augmentation E/h (E the harmonic mean of the two sides'
         moduli; the solution does not depend on it), and the penalty stiffness (E/h of the minus cell unless
-        given)."""
+        given); each fault's tension cut-off (at the cone's apex or at zero)."""
         fc = self.faces
         coh = np.array([s.cohesion for s in self.settings])[fc.fault]
         tphi = np.tan(np.radians([s.friction_angle for s in self.settings]))[fc.fault]
@@ -95,8 +95,9 @@ class FaultInterface:
         k = fc.young / h
         kn = np.array([s.penalty_normal for s in self.settings])[fc.fault]
         kt = np.array([s.penalty_tangential for s in self.settings])[fc.fault]
-        return (ct.FaceLaw(fc.area, coh, tphi, c, c),
-                ct.FaceLaw(fc.area, coh, tphi, np.where(kn > 0, kn, k), np.where(kt > 0, kt, k)))
+        apex = np.array([s.tension_cutoff == "apex" for s in self.settings], dtype=bool)[fc.fault]
+        return (ct.FaceLaw(fc.area, coh, tphi, c, c, apex),
+                ct.FaceLaw(fc.area, coh, tphi, np.where(kn > 0, kn, k), np.where(kt > 0, kt, k), apex))
 
     def effective(self, t: np.ndarray) -> np.ndarray:
         """Effective tractions (Terzaghi): the multiplier is the total traction; friction and opening act on
