@@ -149,12 +149,23 @@ SPECS = [
        "iterative); its options apply where not set by the scene or the command line"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
+    _s("pfault_geostatic_stress", "choice", "gravity", "", "the initial vertical stress of a geostatic start: "
+       "gravity, the elastic gravity solve with the faults glued (the overburden in flat layers, the arching around "
+       "stiff bodies and the sediment hung on a stiff rock beside a fault); lithostatic, the weight of the column "
+       "above each cell's centroid, sigma_v = -int rho g dz up to the land surface (flat layers' stress whatever the "
+       "geometry, not in equilibrium where the layers are not flat; no gravity solve). Horizontal stresses by the "
+       "K0 rule either way", choices=("gravity", "lithostatic")),
     _s("pfault_geostatic_k0", "quantity", None, "", "ratio K0 >= 0 of horizontal to vertical effective stress "
        "(hydrostatic pore pressure below -pfault_water_table); unset: nu/(1-nu) of each material"),
     _s("pfault_gravity", "quantity", 9.80665, "m/s**2", "gravitational acceleration"),
     _s("pfault_water_density", "quantity", 1000.0, "kg/m**3", "density of water (head to pressure)"),
     _s("pfault_water_table", "quantity", 0.0, "m", "elevation of the initial water table (hydrostatic "
        "initial pore pressure below it)"),
+    _s("pfault_pore_pressure_unchanged_materials", "names", "", "", "materials whose pore pressure does not change, "
+       "whatever the pore-pressure source (per-material tables, -pfault_flow, -pfault_heads_file) gives there: an "
+       "impermeable rock, a clay the wells do not drain. Their cells take no pore-pressure change (no Biot load, zero "
+       "in fields.h5's pore_pressure_change), nor do the fault faces whose minus side they are; a flow model still "
+       "solves for the head in them (default: none)"),
     # groundwater flow
     _s("pfault_flow", "bool", False, "", "solve transient groundwater flow for the head change and load the "
        "skeleton with dp = rho_w g h (instead of per-material tables)"),

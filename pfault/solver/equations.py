@@ -16,8 +16,10 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ..errors import run_on_root
 from ..faults import contact as ct
 from ..physics import elasticity as el
+from ..physics import geostatic as gs
 from .loads import Loads
 from .setup import rigid_body_modes
 
@@ -154,19 +156,21 @@ class Equations:
         overburden in flat layers, the arching around stiff bodies), horizontal stresses by the K0 rule on
         effective stresses, sigma'_h = K0 sigma'_v, with hydrostatic pore pressure below the water table (K0 =
         -pfault_geostatic_k0, default nu/(1-nu) of each material); no initial shear."""
-        s = self.settings
-        sig = self.effective_stress(u_gravity_local)
-        z = self.asm.centroids[:, 2]
-        p0 = s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
-        alpha = self.asm.alpha
-        nu = self.asm.lam / (2 * (self.asm.lam + self.asm.mu))
-        k0 = np.full(len(z), s.k0) if s.k0 >= 0 else nu / (1 - nu)
-        sv = sig[:, 2, 2]
-        sh = k0 * (sv + alpha * p0) - alpha * p0
-        sigma0 = np.zeros_like(sig)
-        sigma0[:, 0, 0] = sigma0[:, 1, 1] = sh
-        sigma0[:, 2, 2] = sv
-        return sigma0
+        return self._k0_stress(self.effective_stress(u_gravity_local)[:, 2, 2])
+
+    def lithostatic_stress(self) -> np.ndarray:
+        """The initial stress (cells x 3 x 3, Pa) of -pfault_geostatic_stress lithostatic: sigma_v the weight of the
+        column above each cell's centroid (pfault.physics.geostatic.overburden, on the cells gathered on rank 0),
+        horizontal stresses by the K0 rule. Collective."""
+        weight = _overburden(self.comm.tompi4py(), self.mesh.coords[self.mesh.cells], self.asm.density,
+                             self.settings.gravity)
+        return self._k0_stress(-weight)
+
+    def _k0_stress(self, sigma_v: np.ndarray) -> np.ndarray:
+        s, asm = self.settings, self.asm
+        nu = asm.lam / (2 * (asm.lam + asm.mu))
+        return gs.k0_stress(sigma_v, asm.centroids[:, 2], asm.alpha, nu, s.k0, s.water_density, s.gravity,
+                            s.water_table)
 
     def effective_stress(self, u_local: np.ndarray) -> np.ndarray:
         """Incremental effective stress C:eps per cell (nc, 3, 3), its mean over the cell: of the P1 displacements
@@ -240,6 +244,18 @@ class Equations:
         self.loads.destroy()
         for obj in {id(o): o for o in (self.K, self.J, self.nullspace)}.values():
             obj.destroy()
+
+
+def _overburden(mpi: Any, cell_coords: np.ndarray, density: np.ndarray, gravity: float) -> np.ndarray:
+    """The overburden (Pa) at the centroids of this rank's cells (``cell_coords``: n x 4 x 3): the cells of every
+    rank gathered on rank 0 (their vertices found again by their coordinates: a split fault's two copies of a vertex
+    are one there, the column crosses the fault as if glued), the columns followed there, the values sent back."""
+    parts = mpi.gather((cell_coords, density))
+
+    def columns():
+        weight = gs.overburden(np.concatenate([c for c, _ in parts]), np.concatenate([d for _, d in parts]), gravity)
+        return np.split(weight, np.cumsum([len(d) for _, d in parts])[:-1])
+    return mpi.scatter(run_on_root(mpi, columns))
 
 
 def _to_owners(K: Any, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -215,27 +215,15 @@ class StepSolver:
     # -- the geostatic initial state ---------------------------------------------------------------
     def geostatic(self) -> None:
         """The geostatic initial stress, in equilibrium with zero displacement: an elastic gravity solve with the
-        faults glued (Equations.geostatic_stress says what is made of it). The state loads nothing:
+        faults glued (Equations.geostatic_stress says what is made of it), or the lithostatic stress
+        (-pfault_geostatic_stress lithostatic: Equations.lithostatic_stress, no solve). The state loads nothing:
         displacements are those caused by the drawdown, and stresses and fault tractions are the initial ones
         plus the changes; the faults' tractions start from it."""
         eq, state, faults = self.eq, self.state, self.faults
-        eq.loads.gravity(eq.loads.f)
-        ug = state.u.duplicate()
-        ksp = self.snes.getKSP()
-        A = eq.glued_operator()
-        ksp.setOperators(A, A)
-        ksp.solve(eq.loads.f, ug)
-        reason = ksp.getConvergedReason()
-        norm = ug.norm()
-        if reason <= 0 or not np.isfinite(norm):
-            # the initial stress would come from a wrong state: faults open at step 0, every step loaded by it
-            ug.destroy()
-            why = f"KSP reason {reason}" if reason <= 0 else "a non-finite solution"
-            raise StepNotConverged(f"-pfault_geostatic: the elastic gravity solve of the initial stress failed "
-                                   f"({why}); check the solver options (-pfault_solver, -ksp_*, -pc_*) or start "
-                                   f"without it (-pfault_geostatic false)")
-        state.sigma0 = eq.geostatic_stress(eq.local_array(ug))
-        ug.destroy()
+        if eq.settings.geostatic_stress == "lithostatic":
+            state.sigma0 = eq.lithostatic_stress()
+        else:
+            state.sigma0 = eq.geostatic_stress(gravity_state(eq, self.snes.getKSP(), state.u))
         eq.loads.set(0.0)       # the face bubbles' load back from gravity's to that of the start
         state.u.set(0.0)
         if faults is not None:
@@ -401,6 +389,29 @@ class StepSolver:
 
 
 COST_KEYS = ("newton_its", "ksp_its", "wall_s", "factorizations", "jacobians")
+
+
+def gravity_state(eq: Any, ksp: Any, like: Any) -> np.ndarray:
+    """The local displacements of the elastic gravity solve with the faults glued (the geostatic start's
+    -pfault_geostatic_stress gravity), solved by ``ksp`` into a vector like ``like``; StepNotConverged if it
+    fails."""
+    eq.loads.gravity(eq.loads.f)
+    ug = like.duplicate()
+    A = eq.glued_operator()
+    ksp.setOperators(A, A)
+    ksp.solve(eq.loads.f, ug)
+    reason = ksp.getConvergedReason()
+    norm = ug.norm()
+    if reason <= 0 or not np.isfinite(norm):
+        # the initial stress would come from a wrong state: faults open at step 0, every step loaded by it
+        ug.destroy()
+        why = f"KSP reason {reason}" if reason <= 0 else "a non-finite solution"
+        raise StepNotConverged(f"-pfault_geostatic: the elastic gravity solve of the initial stress failed "
+                               f"({why}); check the solver options (-pfault_solver, -ksp_*, -pc_*) or start "
+                               f"without it (-pfault_geostatic false)")
+    local = eq.local_array(ug)
+    ug.destroy()
+    return local
 
 
 def combined_cost(records: list[dict]) -> dict:

@@ -148,8 +148,9 @@ def test_bar_breaks_at_its_tensile_strength(tmp_path, ranks):
 PULL = 1e3                                # Pa
 PRESSED_PULLED = BAR.replace(f"-pfault_fault_fissure_tensile_strength {T}\n", "").replace(
     f"-pfault_bc_xmax_displacement {STRETCH},0,0", f"-pfault_bc_xmax_displacement {PULL * L / E!r},0,0").replace(
-    f"-pfault_bc_xmax_history 0:0,1:0.5,2:{1 - EPS!r},3:{1 + EPS!r},4:2", "-pfault_bc_xmax_history 0:0,1:-1,2:1").replace(
-    "-pfault_time_end 4\n-pfault_time_steps 4", "-pfault_time_end 2\n-pfault_time_steps 2")
+    f"-pfault_bc_xmax_history 0:0,1:0.5,2:{1 - EPS!r},3:{1 + EPS!r},4:2",
+    "-pfault_bc_xmax_history 0:0,1:-1,2:1").replace("-pfault_time_end 4\n-pfault_time_steps 4",
+                                                    "-pfault_time_end 2\n-pfault_time_steps 2")
 
 
 def test_a_fault_whose_cutoff_is_at_zero_opens_at_zero_normal_traction(tmp_path):
