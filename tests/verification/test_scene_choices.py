@@ -7,14 +7,15 @@
   centroid).
 - -pfault_pore_pressure_unchanged_materials: a box of clay over sand drained by a well (the flow model): the clay's
   cells have no pore-pressure change in fields.h5, the sand's and the head the same as without the option (the
-  flow model is unchanged), less subsidence; the effects line and summary.json say it.
+  flow model is unchanged), less subsidence; the effects line and summary.json say it; a restart from its first
+  step's checkpoint (the flow model's head) gives the same run.
 """
 
 import h5py
 import numpy as np
 import pytest
 
-from conftest import FLOW_BOX, run_scene
+from conftest import FLOW_BOX, compare_runs, run_scene
 
 G = 9.80665
 LAYERS = ((0.0, 10.0, 1800.0, 0.3), (10.0, 20.0, 2000.0, 0.25), (20.0, 30.0, 2400.0, 0.2))   # depths, rho, nu
@@ -85,10 +86,10 @@ def test_the_default_is_the_gravity_solve(column):
     assert np.mean(s[:, 2, 2]) == pytest.approx(np.mean(litho[:, 2, 2]), rel=0.04)
 
 
-CLAY_OVER_SAND = FLOW_BOX.replace("-pfault_material_soil_", "-pfault_material_sand_") + """
+CLAY_OVER_SAND = FLOW_BOX.replace("-pfault_material_soil_", "-pfault_material_sand_").replace(
+    "-pfault_box_cells 2,2,2", "-pfault_box_cells 2,2,4") + """
 -pfault_box_materials clay,sand
 -pfault_box_interfaces 10
--pfault_box_cells 2,2,4
 -pfault_material_clay_young_modulus 5*MPa
 -pfault_material_clay_poisson_ratio 0.3
 -pfault_material_clay_hydraulic_conductivity 0.01*m/day
@@ -120,3 +121,8 @@ def test_a_material_whose_pore_pressure_does_not_change(tmp_path):
     line = "groundwater flow transient groundwater flow (pore pressure unchanged in clay)"
     assert line in proc.stdout and held["effects"]["flow"]["detail"] == line.removeprefix("groundwater flow ")
     assert free["effects"]["flow"]["detail"] == "transient groundwater flow"
+    held_opts = ["-pfault_pore_pressure_unchanged_materials", "clay"]
+    run_scene(str(scene), tmp_path / "part", extra=[*held_opts, "-pfault_time_end", "1*day", "-pfault_time_steps", "1"])
+    _, again = run_scene(str(scene), tmp_path / "part", extra=[*held_opts, "-pfault_restart", str(tmp_path / "part")])
+    assert again["completed_steps"] == [1, 2]
+    compare_runs(tmp_path / "held", tmp_path / "part", 1e-12)
