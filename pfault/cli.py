@@ -46,7 +46,9 @@ def _last_words(sim, line, code):
         sim.last_words(line, code)
 
 
-def main(options_file: str, argv: list[str]) -> int:
+def main(options_file: str, argv: list[str], simulation: type | None = None) -> int:
+    """Run the scene ``options_file`` with the command line ``argv``; returns the exit code. ``simulation``: the
+    class of the run (default pfault.simulation.Simulation; a test gives one whose observers inject faults)."""
     from .options import help_text
     from .solver.flow import FlowNotConverged
     from .simulation import Simulation
@@ -57,7 +59,7 @@ def main(options_file: str, argv: list[str]) -> int:
     try:
         if PETSc.Options().hasName("help"):
             PETSc.Sys.Print(help_text())
-        sim = Simulation(options_file, argv)
+        sim = (simulation or Simulation)(options_file, argv)
         summary = sim.run()
         run_on_root(comm, sim.write_summary, summary, time.perf_counter() - t0)
     except (Exception, KeyboardInterrupt) as exc:  # noqa: BLE001  (every failure ends the run through the guard)

@@ -54,10 +54,11 @@ class Effects:
     faults: tuple          # ((name, method), ...)
     flow: bool
     pressure_tables: tuple  # materials with a head or pressure table
-    geostatic: bool
+    geostatic: str         # the initial stress of a geostatic start (gravity, lithostatic), "" without one
     tractions: tuple       # surfaces with a non-zero traction
     displacements: tuple   # surfaces with prescribed displacements
     heads: str = ""        # the groundwater model's head file (-pfault_heads_file), or ""
+    unchanged: tuple = ()  # materials whose pore pressure does not change (-pfault_pore_pressure_unchanged_materials)
 
     def on(self, name: str) -> bool:
         return bool(getattr(self, name))
@@ -67,12 +68,18 @@ class Effects:
         if name == "faults":
             return ", ".join(f"{n} ({m})" for n, m in v)
         if name == "geostatic":
-            return "gravity solve, K0 initial stress" if v else ""
+            return {"gravity": "gravity solve, K0 initial stress", "lithostatic": "lithostatic initial stress "
+                    "(the overburden), K0"}.get(v, "")
         if name == "flow":
-            return "transient groundwater flow" if v else ""
+            return "transient groundwater flow" + self._unchanged() if v else ""
         if name == "heads":
-            return v
+            return v + self._unchanged()
+        if name == "pressure_tables":
+            return ", ".join(v) + self._unchanged()
         return ", ".join(v)
+
+    def _unchanged(self) -> str:
+        return f" (pore pressure unchanged in {', '.join(self.unchanged)})" if self.unchanged else ""
 
     def line(self) -> str:
         """One line naming every effect and whether the scene asks for it."""
@@ -85,17 +92,19 @@ class Effects:
 
 
 def decide(settings: Settings, materials: Sequence[Material], drawdown: MaterialDrawdown, flow: bool,
-           faults: Iterable[FaultSettings], boundaries: Iterable[Boundary], heads: str = "") -> Effects:
+           faults: Iterable[FaultSettings], boundaries: Iterable[Boundary], heads: str = "",
+           unchanged: Iterable[str] = ()) -> Effects:
     """Effects of a scene from its settings: the material names, the drawdown tables, whether the flow model is
-    on, the fault settings, the boundary conditions and the head file of a groundwater model ("" without)."""
+    on, the fault settings, the boundary conditions, the head file of a groundwater model ("" without) and the
+    materials whose pore pressure does not change."""
     tables = tuple(m.name for m, tab in zip(materials, drawdown.tables) if tab is not None)
     return Effects(faults=tuple((f.name, f.method) for f in faults), flow=bool(flow), pressure_tables=tables,
-                   geostatic=bool(settings.geostatic),
+                   geostatic=settings.geostatic_stress if settings.geostatic else "",
                    tractions=tuple(b.name for b in boundaries
                                    if b.kind in ("traction", "displacement") and any(b.traction)),
                    displacements=tuple(b.name for b in boundaries
                                        if b.kind == "displacement" and any(b.displacement)),
-                   heads=heads)
+                   heads=heads, unchanged=tuple(unchanged))
 
 
 def event_total(name: str, key: str = "time") -> float:

@@ -1,12 +1,13 @@
 """The geostatic initial state a scene may start from (-pfault_geostatic true): step 0.
 
-An elastic gravity solve with the faults glued (every fault face stuck: no jump while the state forms) gives the
-vertical stress (the overburden in flat layers, the arching around stiff bodies); the horizontal stresses follow
-the K0 rule on effective stresses, sigma'_h = K0 sigma'_v, with hydrostatic pore pressure below the water table
-(K0 = -pfault_geostatic_k0, default nu/(1-nu) of each material); no initial shear. That stress is the initial
-state: it loads nothing, displacements are those caused by the drawdown, and stresses and fault tractions are the
-initial ones plus the changes; the terms' histories start from it (a fault face's initial traction is the
-prestress projected on it).
+The vertical stress is that of an elastic gravity solve with the faults glued (every fault face stuck: no jump
+while the state forms; the overburden in flat layers, the arching around stiff bodies), or with
+-pfault_geostatic_stress lithostatic the weight of the column above each cell (pfault.physics.geostatic.overburden,
+no solve); the horizontal stresses follow the K0 rule on effective stresses, sigma'_h = K0 sigma'_v, with
+hydrostatic pore pressure below the water table (K0 = -pfault_geostatic_k0, default nu/(1-nu) of each material);
+no initial shear. That stress is the initial state: it loads nothing, displacements are those caused by the
+drawdown, and stresses and fault tractions are the initial ones plus the changes; the terms' histories start from
+it (a fault face's initial traction is the prestress projected on it).
 """
 
 from __future__ import annotations
@@ -16,24 +17,21 @@ from typing import Any
 import numpy as np
 from petsc4py import PETSc
 
-from .errors import StepNotConverged
+from .errors import StepNotConverged, run_on_root
+from .physics import geostatic as gs
 
 
-def k0_stress(sig: np.ndarray, z: np.ndarray, alpha: np.ndarray, lam: np.ndarray, mu: np.ndarray,
-              settings: Any) -> np.ndarray:
-    """The initial stress (cells x 3 x 3, Pa) from the elastic gravity state's stress ``sig`` per cell: its
-    vertical stress, horizontal stresses by the K0 rule on effective stresses with hydrostatic pore pressure below
-    the water table at the cells' centroids ``z``; ``alpha``, ``lam``, ``mu`` per cell."""
-    s = settings
-    p0 = s.water_density * s.gravity * np.maximum(s.water_table - z, 0.0)
-    nu = lam / (2 * (lam + mu))
-    k0 = np.full(len(z), s.k0) if s.k0 >= 0 else nu / (1 - nu)
-    sv = sig[:, 2, 2]
-    sh = k0 * (sv + alpha * p0) - alpha * p0
-    sigma0 = np.zeros_like(sig)
-    sigma0[:, 0, 0] = sigma0[:, 1, 1] = sh
-    sigma0[:, 2, 2] = sv
-    return sigma0
+def overburden(mpi: Any, cell_coords: np.ndarray, density: np.ndarray, gravity: float) -> np.ndarray:
+    """The overburden (Pa) at the centroids of this rank's cells (``cell_coords``: n x 4 x 3): the cells of every
+    rank gathered on rank 0 (their vertices found again by their coordinates: a split fault's two copies of a vertex
+    are one there, the column crosses the fault as if glued), the columns followed there, the values sent back."""
+    parts = mpi.gather((cell_coords, density))
+
+    def columns():
+        weight = gs.overburden(np.concatenate([c for c, _ in parts]), np.concatenate([d for _, d in parts]), gravity)
+        return np.split(weight, np.cumsum([len(d) for _, d in parts])[:-1])
+    return mpi.scatter(run_on_root(mpi, columns))
+
 
 
 class GeostaticStart:
@@ -46,6 +44,25 @@ class GeostaticStart:
     def compute(self, state: Any, solve_linear: Any) -> None:
         """The initial stress (``state.sigma0``), the terms' histories from it, and u = u_ref: the initial state,
         in equilibrium with zero displacement."""
+        eq, asm, s = self.eq, self.eq.asm, self.settings
+        if s.geostatic_stress == "lithostatic":
+            sigma_v = -overburden(eq.comm.tompi4py(), eq.mesh.coords[eq.mesh.cells], asm.density, s.gravity)
+        else:
+            sigma_v = self.gravity_stress(state, solve_linear)[:, 2, 2]
+        nu = asm.lam / (2 * (asm.lam + asm.mu))
+        state.sigma0 = gs.k0_stress(sigma_v, asm.centroids[:, 2], asm.alpha, nu, s.k0, s.water_density, s.gravity,
+                                    s.water_table)
+        eq.loads.set(0.0)       # the terms' loads back from gravity's to those of the start
+        state.u.set(0.0)
+        loc = eq.local_array(state.u)
+        state.histories = tuple(term.prestressed(state.sigma0, loc, load, h)
+                                for term, load, h in zip(eq.terms, eq.loads.term_loads, state.histories))
+        eq.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=state.u)
+        state.u.copy(state.u_ref)
+
+    def gravity_stress(self, state: Any, solve_linear: Any) -> np.ndarray:
+        """The effective stress per cell of the elastic gravity state with the terms' initial operator (the faults
+        glued); StepNotConverged if the solve fails."""
         eq = self.eq
         eq.loads.gravity(eq.loads.f)
         ug = state.u.duplicate()
@@ -58,14 +75,6 @@ class GeostaticStart:
             raise StepNotConverged(f"-pfault_geostatic: the elastic gravity solve of the initial stress failed "
                                    f"({why}); check the solver options (-pfault_solver, -ksp_*, -pc_*) or start "
                                    f"without it (-pfault_geostatic false)")
-        asm = eq.asm
         sig = eq.effective_stress(eq.local_array(ug), state.histories)
-        state.sigma0 = k0_stress(sig, asm.centroids[:, 2], asm.alpha, asm.lam, asm.mu, self.settings)
         ug.destroy()
-        eq.loads.set(0.0)       # the terms' loads back from gravity's to those of the start
-        state.u.set(0.0)
-        loc = eq.local_array(state.u)
-        state.histories = tuple(term.prestressed(state.sigma0, loc, load, h)
-                                for term, load, h in zip(eq.terms, eq.loads.term_loads, state.histories))
-        eq.to_global(loc, PETSc.InsertMode.INSERT_VALUES, out=state.u)
-        state.u.copy(state.u_ref)
+        return sig

@@ -24,7 +24,7 @@ from .errors import InputError, run_on_root, warn
 from .mesh import distributed
 from .solver.equations import Equations, constrained_local
 from .solver.choice import AUTO, ITERATIVE_FROM_DOFS, solver_file_name
-from .sources import FlowSource, TableSource
+from .sources import FlowSource, TableSource, Unchanged
 from .faults.bubbles import CellBubbles
 from .faults.faces import FaultFaces
 from .faults.history import face_pressure
@@ -52,6 +52,7 @@ class Scene:
     heads_settings: Any = None      # a groundwater model's heads (pfault.sources.heads.HeadsSettings), or None
     mesh_origin: tuple = (0.0, 0.0, 0.0)    # site coordinates = mesh coordinates + mesh_origin (m)
     warnings: tuple = ()            # the warning lines printed about the scene's input (summary.json keeps them)
+    unchanged_materials: tuple = ()         # materials whose pore pressure does not change
 
 
 @dataclass(frozen=True)
@@ -146,6 +147,8 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
                              "per-material head_drawdown/pressure_change tables")
         flow_settings = read_flow_settings(reader, material_names, materials, surface_names, s.water_density,
                                            s.gravity)
+    source_given = drawdown.active or flow_settings is not None or heads_settings is not None
+    unchanged = scn.read_unchanged_materials(reader, material_names, drawdown, source_given)
     fault_settings = scn.read_faults(reader, surface_names)
     fault_names = [f.name for f in fault_settings]
     boundaries = scn.read_boundaries(reader, surface_names, exclude=fault_names)
@@ -153,10 +156,10 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     reader.check_pfault_options()
     warnings = tuple(warn(comm, text) for text in scn.time_table_warnings(reader, s))
     effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries,
-                             heads=heads_settings.file if heads_settings is not None else "")
+                             heads=heads_settings.file if heads_settings is not None else "", unchanged=unchanged)
     scene = Scene(s, restart_dir, figures, solver_name, material_names, surface_names,
                   materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects,
-                  heads_settings, mesh_origin, warnings)
+                  heads_settings, mesh_origin, warnings=warnings, unchanged_materials=unchanged)
     return scene, serial
 
 
@@ -203,6 +206,16 @@ def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
 
 
 def _source(scene: Scene, mesh: Any, props: Any, field_values: dict | None) -> Any:
+    """The pore-pressure source (the flow model, a groundwater model's heads, or the per-material tables), with no
+    change in the materials whose pore pressure does not change."""
+    source = _given_source(scene, mesh, props, field_values)
+    if not scene.unchanged_materials:
+        return source
+    ids = [scene.material_names.index(name) for name in scene.unchanged_materials]
+    return Unchanged(source, np.isin(mesh.cell_material, ids))
+
+
+def _given_source(scene: Scene, mesh: Any, props: Any, field_values: dict | None) -> Any:
     """The pore-pressure source: the flow model, a groundwater model's heads, or the per-material tables."""
     if scene.heads_settings is not None:
         with logged("pfaultHeadsRead"):

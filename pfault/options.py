@@ -69,10 +69,14 @@ SPECS = [
        "fault at size factor 1 (times -pfault_mesh_size_factor); 52 m gives the paper's 8,074 fault faces, the "
        "layers' 50/7 m elements as wide as high beside the fault, which the fault's slip needs to converge "
        "(docs/verification.md, calibrated Queretaro)"),
+    _s("pfault_queretaro_layer_thickness", "quantity", None, "m", "queretaro: height of the mesh's horizontal "
+       "layers of elements at size factor 1 (times -pfault_mesh_size_factor), in [0.1, 50] m, rounded to whole "
+       "layers in the clay and in the sand (default 50/7 m: 3 layers in the 20 m clay, 4 in the 30 m sand)"),
     _s("pfault_queretaro_surface_size", "quantity", None, "m", "queretaro: element height at the land surface "
-       "at size factor 1 (times -pfault_mesh_size_factor), in [0.1, 50/7] m; the layers below grow by 0.5 m per "
-       "metre of depth to the layers' 50/7 m: thin rows of fault faces under the land surface, which the fault's "
-       "answer needs to converge (docs/verification.md, calibrated Queretaro; default: uniform 50/7 m layers)"),
+       "at size factor 1 (times -pfault_mesh_size_factor), in [0.1, the layer thickness] m; the layers below grow "
+       "by 0.5 m per metre of depth to -pfault_queretaro_layer_thickness: thin rows of fault faces under the land "
+       "surface, which the fault's answer needs to converge (docs/verification.md, calibrated Queretaro; default: "
+       "uniform layers)"),
     _s("pfault_queretaro_wells", "list", "12000,12000,12000,15000,12000,18000", "m", "queretaro: well "
        "positions x1,y1,x2,y2,... in the aquifer; the mesh is refined around them (default: -pfault_flow_wells "
        "when given)"),
@@ -109,14 +113,22 @@ SPECS = [
     # faults
     _s("pfault_faults", "names", "", "", "physical surfaces that are faults (split, with contact and friction)"),
     _s("pfault_fault_<fault>_cohesion", "quantity", 0.0, "Pa", "cohesion c of the Mohr-Coulomb criterion (a "
-       "face opens at the cone's apex, a tensile effective normal traction c / tan(phi))"),
+       "face opens at the cone's apex, a tensile effective normal traction c / tan(phi), unless "
+       "-pfault_fault_<fault>_tension_cutoff zero)"),
     _s("pfault_fault_<fault>_friction_angle", "quantity", 30.0, "degree", "friction angle phi"),
     _s("pfault_fault_<fault>_tensile_strength", "quantity", 0.0, "Pa", "tensile strength T of the intact surface: "
        "with T > 0 the fault is a candidate surface whose faces stay glued until the effective normal traction "
        "exceeds min(T, c / tan(phi)) or the shear c - t_N tan(phi), then break for good (0: a pre-existing "
        "fault, every face broken from the start)"),
+    _s("pfault_fault_<fault>_tension_cutoff", "choice", "apex", "", "where the fault's law opens: apex, at the "
+       "Mohr-Coulomb cone's apex, a tensile effective normal traction c / tan(phi) (the shear strength falls to zero "
+       "as the face opens); zero, at t_N = 0 (a fault that carries no tension: a cohesive face opens as soon as its "
+       "effective normal traction is tensile, its shear strength dropping from c to 0, which Newton converges on "
+       "less easily). A candidate surface's intact faces keep min(T, c / tan(phi)); this sets the law of its "
+       "broken faces (cohesion c_r)", choices=("apex", "zero")),
     _s("pfault_fault_<fault>_residual_cohesion", "quantity", 0.0, "Pa", "cohesion of a broken face of a "
-       "candidate surface (at most the cohesion; a broken face opens at c_r / tan(phi))"),
+       "candidate surface (at most the cohesion; a broken face opens at c_r / tan(phi), or at zero with "
+       "-pfault_fault_<fault>_tension_cutoff zero)"),
     _s("pfault_fault_<fault>_method", "choice", "lagrange", "", "contact enforcement",
        choices=("lagrange", "penalty")),
     _s("pfault_fault_<fault>_penalty_normal", "quantity", 0.0, "Pa/m", "normal penalty stiffness (0: E/h of "
@@ -139,12 +151,23 @@ SPECS = [
        "iterative); its options apply where not set by the scene or the command line"),
     # loading / initial state
     _s("pfault_geostatic", "bool", False, "", "start from a geostatic stress state (gravity, K0)"),
+    _s("pfault_geostatic_stress", "choice", "gravity", "", "the initial vertical stress of a geostatic start: "
+       "gravity, the elastic gravity solve with the faults glued (the overburden in flat layers, the arching around "
+       "stiff bodies and the sediment hung on a stiff rock beside a fault); lithostatic, the weight of the column "
+       "above each cell's centroid, sigma_v = -int rho g dz up to the land surface (flat layers' stress whatever the "
+       "geometry, not in equilibrium where the layers are not flat; no gravity solve). Horizontal stresses by the "
+       "K0 rule either way", choices=("gravity", "lithostatic")),
     _s("pfault_geostatic_k0", "quantity", None, "", "ratio K0 >= 0 of horizontal to vertical effective stress "
        "(hydrostatic pore pressure below -pfault_water_table); unset: nu/(1-nu) of each material"),
     _s("pfault_gravity", "quantity", 9.80665, "m/s**2", "gravitational acceleration"),
     _s("pfault_water_density", "quantity", 1000.0, "kg/m**3", "density of water (head to pressure)"),
     _s("pfault_water_table", "quantity", 0.0, "m", "elevation of the initial water table (hydrostatic "
        "initial pore pressure below it)"),
+    _s("pfault_pore_pressure_unchanged_materials", "names", "", "", "materials whose pore pressure does not change, "
+       "whatever the pore-pressure source (per-material tables, -pfault_flow, -pfault_heads_file) gives there: an "
+       "impermeable rock, a clay the wells do not drain. Their cells take no pore-pressure change (no Biot load, zero "
+       "in fields.h5's pore_pressure_change), nor do the fault faces whose minus side they are; a flow model still "
+       "solves for the head in them (default: none)"),
     # groundwater flow
     _s("pfault_flow", "bool", False, "", "solve transient groundwater flow for the head change and load the "
        "skeleton with dp = rho_w g h (instead of per-material tables)"),

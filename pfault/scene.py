@@ -65,6 +65,7 @@ class Settings:
     water_table: float
     max_cuts: int = 3
     hazard_strain_threshold: float = 2e-4
+    geostatic_stress: str = "gravity"   # the initial vertical stress: gravity (the elastic solve) | lithostatic
 
 
 # the solver reads a negative K0 as "not given"; users cannot give one (read_settings rejects it)
@@ -82,6 +83,9 @@ def read_settings(reader: OptionReader, options_file: str = "") -> Settings:
     every = reader.get("pfault_output_every")
     if every < 1:
         raise InputError(f"-pfault_output_every: must be at least 1 (fields every N steps), got {every}")
+    if reader.has("pfault_geostatic_stress") and not reader.get("pfault_geostatic"):
+        raise InputError("-pfault_geostatic_stress: sets the initial stress of a geostatic start; add "
+                         "-pfault_geostatic true or remove it")
     k0 = reader.get("pfault_geostatic_k0")
     if k0 is not None and k0 < 0:
         raise InputError(f"-pfault_geostatic_k0: must not be negative, got {k0:g} (leave it unset for "
@@ -93,6 +97,7 @@ def read_settings(reader: OptionReader, options_file: str = "") -> Settings:
                  k0=K0_UNSET if k0 is None else k0, gravity=reader.get("pfault_gravity"),
                  water_density=reader.get("pfault_water_density"), water_table=reader.get("pfault_water_table"),
                  max_cuts=reader.get("pfault_time_max_cuts"),
+                 geostatic_stress=reader.get("pfault_geostatic_stress"),
                  hazard_strain_threshold=reader.get("pfault_hazard_strain_threshold"))
     if not s.hazard_strain_threshold > 0:
         raise InputError(f"-pfault_hazard_strain_threshold: must be positive, got {s.hazard_strain_threshold:g} "
@@ -143,7 +148,8 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
     if settings.mesh_generator == "queretaro":
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_queretaro_{key}") for key in ("fault_x", "clay_thickness", "wells",
-                                                                             "fault_size", "surface_size")}
+                                                                             "fault_size", "surface_size",
+                                                                             "layer_thickness")}
         if not reader.has("pfault_queretaro_wells") and reader.has("pfault_flow_wells"):
             # refine where the flow model pumps
             params["wells"] = reader.get("pfault_flow_wells")
@@ -276,6 +282,24 @@ def check_no_fault_boundaries(reader: OptionReader, fault_names: Iterable[str]) 
                              "options")
 
 
+def read_unchanged_materials(reader: OptionReader, names: Sequence[str], drawdown: MaterialDrawdown,
+                             source_given: bool) -> tuple[str, ...]:
+    """The materials whose pore pressure does not change (-pfault_pore_pressure_unchanged_materials): materials of
+    the mesh, none with a pressure table of its own, in a scene whose pore pressure changes (``source_given``)."""
+    opt = "pfault_pore_pressure_unchanged_materials"
+    given = tuple(dict.fromkeys(reader.get(opt)))
+    for name in given:
+        if name not in names:
+            raise InputError(f"-{opt}: '{name}' is not a material of the mesh (materials: {', '.join(names)})")
+        if drawdown.tables[list(names).index(name)] is not None:
+            raise InputError(f"-{opt}: {name} has a head_drawdown or pressure_change table of its own; remove it "
+                             "from the list or remove its table")
+    if given and not source_given:
+        raise InputError(f"-{opt}: the scene changes no pore pressure (no head_drawdown or pressure_change table, "
+                         "-pfault_flow or -pfault_heads_file); remove the option")
+    return given
+
+
 def read_boundaries(reader: OptionReader, surface_names: Iterable[str],
                     exclude: Collection[str] = ()) -> list[Boundary]:
     """The boundary conditions of the surfaces ``surface_names`` but those in ``exclude`` (the faults, which may
@@ -378,6 +402,7 @@ def read_faults(reader: OptionReader, surface_names: Collection[str]) -> list[Fa
         method = reader.get(p + "method")
         faults.append(FaultSettings(name=name, cohesion=c, friction_angle=phi, method=method,
                                     tensile_strength=strength, residual_cohesion=residual,
+                                    tension_cutoff=reader.get(p + "tension_cutoff"),
                                     penalty_normal=reader.get(p + "penalty_normal") if method == "penalty" else 0.0,
                                     penalty_tangential=reader.get(p + "penalty_tangential")
                                     if method == "penalty" else 0.0))

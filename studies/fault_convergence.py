@@ -19,8 +19,8 @@ penalty faces (their default stiffness E/h) instead of Lagrange faces (``penalty
 above (``cap10``), an isotropic geostatic start (``k01``: K0 = 1 instead of nu / (1 - nu) of each material), the 3-D
 block only 40 m long along the strike (``3d-w40``: the same plane-strain problem, so that its tetrahedra can be
 refined to 3.2 m on the fault), the tension cut-off at t_N = 0 instead of the cone's apex (``zero``:
-pfault.faults.contact.tensile_strength replaced by zero in the child process), and ``glued`` (cohesion 1e4 MPa: no
-face slips; the elastic comparison of the slab with the 3-D block).
+-pfault_fault_fault_tension_cutoff zero), and ``glued`` (cohesion 1e4 MPa: no face slips; the elastic comparison of
+the slab with the 3-D block). Every variant is an option of pfault's or of the mesher's, given on the command line.
 --no-run rebuilds the table from the run directories already there.
 """
 
@@ -31,50 +31,54 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from studies.run import run_logged  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RUNS = os.path.join(ROOT, "runs", "fault_convergence")
 SCENE = os.path.join(ROOT, "config", "faulted_aquifer.opts")
 MESHER = os.path.join(ROOT, "benchmarks", "faulted_aquifer_mesh.py")
 QUIET = ["-pfault_figures", "false"]
+ZERO = ["-pfault_fault_fault_tension_cutoff", "zero"]
+TIMEOUT = 4 * 3600.0    # s, a run's limit
 
 
 def _cases():
-    """name -> (mesh arguments, ranks, pfault options, stabilisation fraction or None); a name ending in
-    -zero: the tension cut-off at t_N = 0 (the law before the cut-off moved to the cone's apex)."""
+    """name -> (mesh arguments, ranks, pfault options); a name ending in -zero: the tension cut-off at t_N = 0 (the
+    law before the cut-off moved to the cone's apex)."""
     c = {}
     for f in ("2", "1.4", "1"):
-        c[f"3d-f{f}"] = (["--size-factor", f], 2 if f == "1" else 1, [], None)
-    c["3d-f2-zero"] = (["--size-factor", "2"], 1, [], None)
-    c["3d-f1.4-zero"] = (["--size-factor", "1.4"], 1, [], None)
+        c[f"3d-f{f}"] = (["--size-factor", f], 2 if f == "1" else 1, [])
+    c["3d-f2-zero"] = (["--size-factor", "2"], 1, ZERO)
+    c["3d-f1.4-zero"] = (["--size-factor", "1.4"], 1, ZERO)
     # the block 40 m long along the strike (the same plane-strain problem), down to 3.2 m on the fault
     for f in ("1", "0.5", "0.35"):
-        c[f"3d-w40-f{f}"] = (["--size-factor", f, "--strike-length", "40"], 1, [], None)
-    c["3d-f2-glued"] = (["--size-factor", "2"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"], None)
-    c["3d-f2-cap10"] = (["--size-factor", "2", "--fault-top", "10"], 1, [], None)
-    c["3d-f2-penalty"] = (["--size-factor", "2"], 1, ["-pfault_fault_fault_method", "penalty"], None)
-    c["3d-f1.4-penalty"] = (["--size-factor", "1.4"], 1, ["-pfault_fault_fault_method", "penalty"], None)
+        c[f"3d-w40-f{f}"] = (["--size-factor", f, "--strike-length", "40"], 1, [])
+    c["3d-f2-glued"] = (["--size-factor", "2"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"])
+    c["3d-f2-cap10"] = (["--size-factor", "2", "--fault-top", "10"], 1, [])
+    c["3d-f2-penalty"] = (["--size-factor", "2"], 1, ["-pfault_fault_fault_method", "penalty"])
+    c["3d-f1.4-penalty"] = (["--size-factor", "1.4"], 1, ["-pfault_fault_fault_method", "penalty"])
     for h in ("8", "4", "2", "1", "0.5"):
-        c[f"slab-h{h}"] = (["--slab", "--fault-size", h], 1, [], None)
+        c[f"slab-h{h}"] = (["--slab", "--fault-size", h], 1, [])
     # 52,000 tetrahedra: MUMPS, as the coarser slabs have by -pfault_solver auto (the iterative solver took 62
     # Krylov iterations per Newton iteration on these flat elements)
-    c["slab-h0.25"] = (["--slab", "--fault-size", "0.25"], 1, ["-pfault_solver", "mumps"], None)
+    c["slab-h0.25"] = (["--slab", "--fault-size", "0.25"], 1, ["-pfault_solver", "mumps"])
     for h in ("8", "2"):
-        c[f"slab-h{h}-c0"] = (["--slab", "--fault-size", h], 1, ["-pfault_fault_fault_cohesion", "0"], None)
+        c[f"slab-h{h}-c0"] = (["--slab", "--fault-size", h], 1, ["-pfault_fault_fault_cohesion", "0"])
     for h in ("4", "1"):
         c[f"slab-h{h}-penalty"] = (["--slab", "--fault-size", h], 1,
-                                   ["-pfault_fault_fault_method", "penalty"], None)
-        c[f"slab-h{h}-c0"] = (["--slab", "--fault-size", h], 1, ["-pfault_fault_fault_cohesion", "0"], None)
-        c[f"slab-h{h}-cap10"] = (["--slab", "--fault-size", h, "--fault-top", "10"], 1, [], None)
+                                   ["-pfault_fault_fault_method", "penalty"])
+        c[f"slab-h{h}-c0"] = (["--slab", "--fault-size", h], 1, ["-pfault_fault_fault_cohesion", "0"])
+        c[f"slab-h{h}-cap10"] = (["--slab", "--fault-size", h, "--fault-top", "10"], 1, [])
     for h in ("8", "4", "2", "1"):
-        c[f"slab-h{h}-zero"] = (["--slab", "--fault-size", h], 1, [], None)
+        c[f"slab-h{h}-zero"] = (["--slab", "--fault-size", h], 1, ZERO)
     for h in ("4", "1"):       # the initial state: K0 = 1 (an isotropic geostatic stress) instead of nu/(1-nu)
-        for law in ("", "-zero"):
-            c[f"slab-h{h}-k01{law}"] = (["--slab", "--fault-size", h], 1, ["-pfault_geostatic_k0", "1"], None)
-    c["slab-h4-glued"] = (["--slab", "--fault-size", "4"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"], None)
+        c[f"slab-h{h}-k01"] = (["--slab", "--fault-size", h], 1, ["-pfault_geostatic_k0", "1"])
+        c[f"slab-h{h}-k01-zero"] = (["--slab", "--fault-size", h], 1, ["-pfault_geostatic_k0", "1", *ZERO])
+    c["slab-h4-glued"] = (["--slab", "--fault-size", "4"], 1, ["-pfault_fault_fault_cohesion", "1e4*MPa"])
     return c
 
 
@@ -91,42 +95,22 @@ def _mesh(args):
 
 
 def run(name):
-    mesh_args, ranks, opts, frac = CASES[name]
+    """The case's run: its mesh, then pfault on the scene with the case's options."""
+    mesh_args, ranks, opts = CASES[name]
     out = os.path.join(RUNS, name)
     os.makedirs(out, exist_ok=True)
     mesh = _mesh(mesh_args)
-    cutoff = "zero" if name.endswith("-zero") else "apex"
-    cmd = [sys.executable, os.path.join(ROOT, "benchmarks", "fault_convergence.py"), "--child", str(frac or 0),
-           cutoff, SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *QUIET, *opts]
-    if ranks > 1:
-        cmd = ["mpirun", "-n", str(ranks), *cmd]
-    run_logged(name, cmd, out)
+    run_case(name, ["-m", "pfault", SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *QUIET, *opts],
+             ranks, out)
 
 
-def run_logged(name, cmd, out):
-    """Run ``cmd`` from the repository's root with its output in ``out``/stdout.txt; ``out``/case.json records the
-    command, its exit code and wall time (the studies' measures read them)."""
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    t0 = time.time()
-    with open(os.path.join(out, "stdout.txt"), "w") as log:
-        rc = subprocess.run(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, env=env).returncode
+def run_case(name, args, ranks, out):
+    """Run ``python ARGS`` on ``ranks`` ranks from the repository's root (studies.run.run_logged) with its output in
+    ``out``/stdout.txt; ``out``/case.json records the command, its exit code and wall time."""
+    done = run_logged(args, ranks, os.path.join(out, "stdout.txt"), TIMEOUT)
     with open(os.path.join(out, "case.json"), "w") as f:
-        json.dump({"command": cmd, "exit_code": rc, "wall_s": time.time() - t0}, f)
-    print(f"{name}: exit {rc}, {time.time() - t0:.0f} s", flush=True)
-
-
-def child(frac, cutoff, argv):
-    """Run pfault in this process; with frac > 0 the stabilisation at that share of the compliance estimate;
-    cutoff "zero": no tensile strength (the cut-off at t_N = 0, where a cohesive face's shear strength jumps
-    from c to 0)."""
-    if cutoff == "zero":
-        from pfault.faults import contact
-        contact.tensile_strength = lambda cohesion, tan_phi: np.zeros(np.shape(cohesion))
-    if frac > 0:
-        raise SystemExit("the traction-jump stabilisation's share cannot be varied: the face bubbles replaced it "
-                         "(its figures in docs/verification.md were measured before)")
-    from pfault.__main__ import run as pfault_run
-    return pfault_run([sys.argv[0], *argv])
+        json.dump({"command": done.command, "exit_code": done.code, "wall_s": done.wall}, f)
+    print(f"{name}: exit {done.code}, {done.wall:.0f} s", flush=True)
 
 
 def measures(out, step=None):
@@ -227,8 +211,6 @@ def surface_profiles(slab_case="slab-h4-glued", block_case="3d-f2-glued"):
 
 
 def main():
-    if len(sys.argv) > 2 and sys.argv[1] == "--child":
-        return child(float(sys.argv[2]), sys.argv[3], sys.argv[4:])
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default="", help="comma-separated case names (default: all)")
     ap.add_argument("--no-run", action="store_true", help="only rebuild the table from the runs there")
@@ -255,3 +237,7 @@ def main():
     with open(os.path.join(RUNS, "table.md" if a.step is None else f"table_step{a.step}.md"), "w") as f:
         f.write(text + "\n")
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -6,10 +6,12 @@ Conventions
 - jump g = u_plus - u_minus (face average of the P1 jump); local g_loc = R g; g_N > 0 is opening.
 - traction t (local): the traction the plus side exerts on the minus side; t_N < 0 is compression. The
   laws act on the effective traction (t_N + alpha p for a wet fault).
-- Mohr-Coulomb with its tension cut-off at the apex: |t_T| <= tau_L = c - t_N tan(phi) and t_N <= T, with
-  the tensile strength T = c / tan(phi) where the cone's shear strength reaches zero (T = 0 without cohesion;
-  a face with cohesion and phi = 0 never opens). A face opens when its normal traction reaches T, and an open
-  face carries T normal to it and no shear: the strength surface has no jump where a face opens.
+- Mohr-Coulomb with a tension cut-off: |t_T| <= tau_L = c - t_N tan(phi) and t_N <= T. By default (``apex``) the
+  cut-off is the tensile strength T = c / tan(phi) where the cone's shear strength reaches zero (T = 0 without
+  cohesion; a face with cohesion and phi = 0 never opens): a face opens when its normal traction reaches T, an
+  open face carries T normal to it and no shear, and the strength surface has no jump where a face opens. A
+  fault whose cut-off is at zero (-pfault_fault_<name>_tension_cutoff zero; ``FaceLaw.apex`` False) carries no
+  tension: it opens at t_N = 0, where a cohesive face's shear strength drops from c to 0.
 
 Lagrange faces: one semismooth complementarity residual per face (Alart-Curnier, the projection form of
 Hueber, Stadler & Wohlmuth), with the augmented normal traction lam = t_N + c_N g_N and the augmented
@@ -20,15 +22,16 @@ tangential traction q = t_T + c_T dg_T (dg_T = g_T - g_T^n, the slip of the step
 
 P_tau projects onto the disc of radius tau: stick (|q| <= tau) r_T = -A c_T dg_T; slip r_T = A (t_T - tau q/|q|),
 which at a solution is the maximum-dissipation law (dg_T parallel to t_T, |t_T| = tau). The state of each face
-is read from the iterate inside every evaluation; r is continuous across stick/slip and across closed/open
-(tau = c - tan(phi) T = 0 at the switch, with or without cohesion). A cut-off at t_N = 0 with cohesion would
-drop the shear strength from c to 0 where the face opens: Newton then cycled a face between stuck and open
-(config/faulted_aquifer.opts at size factor 2: 200 Newton iterations and 8 sub-steps in its fifth year, not
-converged). The rows are forces (Pa m^2), like the displacement rows. The solution does not depend on
-c_N, c_T > 0 (stiffnesses, Pa/m, set per face by the interface from E/h); they only decide which branch Newton
-takes. On Lagrange faces g is the face-mean jump with the part of the face bubbles (pfault.faults.bubbles), which
-decreases with the face's own traction (d g / d t = -C K_bb^-1 C^T / A, negative definite): t + c g stays
-increasing in t.
+is read from the iterate inside every evaluation; r is continuous across stick/slip, and across closed/open with
+the cut-off at the apex (tau = c - tan(phi) T = 0 at the switch, with or without cohesion). With the cut-off at
+t_N = 0 and cohesion the shear strength drops from c to 0 where the face opens, and r jumps there: Newton may cycle
+a face between stuck and open (config/faulted_aquifer.opts at size factor 2, before the face bubbles: 200 Newton
+iterations and 8 sub-steps in its fifth year, not converged; its slab at h = 8 m converges in at most 3 Newton
+iterations a step with the bubbles). The rows are forces (Pa m^2), like the displacement rows. The solution does
+not depend on c_N, c_T > 0 (stiffnesses, Pa/m, set per face by the interface from E/h); they only decide which
+branch Newton takes. On Lagrange faces g is the face-mean jump with the part of the face bubbles
+(pfault.faults.bubbles), which decreases with the face's own traction (d g / d t = -C K_bb^-1 C^T / A, negative
+definite): t + c g stays increasing in t.
 """
 
 from __future__ import annotations
@@ -49,6 +52,11 @@ class FaceLaw:
     tan_phi: np.ndarray
     c_n: np.ndarray         # normal stiffness (Pa/m): augmentation (Lagrange) or penalty
     c_t: np.ndarray         # tangential stiffness (Pa/m)
+    apex: np.ndarray | None = None  # bool: the tension cut-off at the cone's apex (True) or at t_N = 0; None: apex
+
+    def __post_init__(self) -> None:
+        if self.apex is None:
+            object.__setattr__(self, "apex", np.ones(len(self.area), dtype=bool))
 
     def __getitem__(self, idx: np.ndarray | slice) -> FaceLaw:
         return FaceLaw(*(getattr(self, f.name)[idx] for f in fields(self)))
@@ -83,12 +91,18 @@ def tensile_strength(cohesion: np.ndarray, tan_phi: np.ndarray) -> np.ndarray:
     return out
 
 
+def tension_cutoff(law: FaceLaw) -> np.ndarray:
+    """The tension cut-off T of each face's law (Pa): the cone's apex c / tan(phi) (``tensile_strength``), or 0
+    where the law's cut-off is at zero (``law.apex`` False)."""
+    return np.where(law.apex, tensile_strength(law.cohesion, law.tan_phi), 0.0)
+
+
 def states(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t: np.ndarray, tol: float = 0.0) -> np.ndarray:
     """Stick/slip/open of each face at the iterate (g, t): the branch of the semismooth residual. With tol > 0
     (Pa) a face within tol of a switch is reported in the branch that holds it in place (closed, stuck): at zero
     traction and zero jump a face is at once open, slipping and stuck, and round-off must not pick one."""
     lam = t[:, 0] + law.c_n * g[:, 0]
-    strength = tensile_strength(law.cohesion, law.tan_phi)
+    strength = tension_cutoff(law)
     closed = lam <= strength + tol     # a face without traction and jump (a fresh fault) starts closed
     tau = np.where(closed, coulomb_limit(np.minimum(lam, strength), law.cohesion, law.tan_phi), 0.0)
     q = t[:, 1:] + law.c_t[:, None] * (g[:, 1:] - g_prev[:, 1:])
@@ -113,7 +127,7 @@ def lagrange_rows(law: FaceLaw, g: np.ndarray, g_prev: np.ndarray, t: np.ndarray
     r[closed, 0] = -cn[closed] * g[closed, 0]
     dg[closed, 0, 0] = -cn[closed]
     r[opn] = t[opn]
-    r[opn, 0] -= tensile_strength(law.cohesion[opn], law.tan_phi[opn])
+    r[opn, 0] -= tension_cutoff(law[opn])
     dt[opn] = np.eye(3)[None]
     # stick: -A c_T dg_T
     stick = st == STICK

@@ -16,6 +16,7 @@ class FaultSettings:
     penalty_tangential: float
     tensile_strength: float = 0.0  # Pa: of the intact surface (0: a pre-existing fault, broken from the start)
     residual_cohesion: float = 0.0  # Pa: of a broken face of a candidate surface
+    tension_cutoff: str = "apex"   # apex: the law opens at c / tan(phi); zero: at t_N = 0 (no tension)
 
     @property
     def candidate(self) -> bool:

@@ -52,7 +52,8 @@ def fault_topology(serial: Any, split: Any, young: np.ndarray) -> FaultTopology:
 class FaceLaws:
     """Per-face law parameters: the Lagrange law (augmentation E/h, E the harmonic mean of the two sides' moduli;
     the solution does not depend on it), the penalty law (stiffness E/h of the minus cell unless given), with the
-    cohesion of an unbroken face; and the faces' strength (pfault.faults.breaking)."""
+    cohesion of an unbroken face and each fault's tension cut-off (at the cone's apex or at zero); and the faces'
+    strength (pfault.faults.breaking)."""
     lagrange: ct.FaceLaw
     penalty: ct.FaceLaw
     strength: br.FaceStrength
@@ -72,8 +73,9 @@ def face_laws(faces: FaultFaces, settings: list, face_young: np.ndarray) -> Face
     k = faces.young / h
     kn = np.array([s.penalty_normal for s in settings])[faces.fault]
     kt = np.array([s.penalty_tangential for s in settings])[faces.fault]
-    return FaceLaws(ct.FaceLaw(faces.area, coh, tphi, c, c),
-                    ct.FaceLaw(faces.area, coh, tphi, np.where(kn > 0, kn, k), np.where(kt > 0, kt, k)),
+    apex = np.array([s.tension_cutoff == "apex" for s in settings], dtype=bool)[faces.fault]
+    return FaceLaws(ct.FaceLaw(faces.area, coh, tphi, c, c, apex),
+                    ct.FaceLaw(faces.area, coh, tphi, np.where(kn > 0, kn, k), np.where(kt > 0, kt, k), apex),
                     br.face_strength(settings, faces.fault))
 
 

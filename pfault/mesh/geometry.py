@@ -57,11 +57,11 @@ QUERETARO_DEFAULTS: dict[str, Any] = dict(
     wells=QUERETARO_WELLS,           # (x, y) of the pumping wells (m); refinement only
     fault_size=52.0,                 # element size along and across the fault at size_factor 1 (m)
     surface_size=None,               # element height at the land surface at size_factor 1 (m); None: layers
+    layer_thickness=50.0 / 7.0,      # layer thickness of the extrusion at size_factor 1 (m; 7 layers over 50 m)
 )
 _QRO_GROWTH = 0.25
 _QRO_H_WELL = 40.0
 _QRO_H_MAX = 1000.0
-_QRO_DZ = 50.0 / 7.0                 # layer thickness of the extrusion at size_factor 1 (7 layers)
 _QRO_DZ_GROWTH = 0.5                 # growth of the layer height with depth under surface_size (m per m)
 
 
@@ -381,9 +381,12 @@ def _queretaro_params(params, f=1.0):
     hf = p["fault_size"] = _real(p["fault_size"], "pfault_queretaro_fault_size")
     if not 1.0 <= hf <= _QRO_H_MAX:
         raise InputError(f"-pfault_queretaro_fault_size: must lie in [1, {_QRO_H_MAX:g}] m, got {hf:g}")
+    dz = p["layer_thickness"] = _real(p["layer_thickness"], "pfault_queretaro_layer_thickness")
+    if not 0.1 <= dz <= depth:
+        raise InputError(f"-pfault_queretaro_layer_thickness: must lie in [0.1, {depth:g}] m, got {dz:g}")
     if p["surface_size"] is not None:
         hs = p["surface_size"] = _real(p["surface_size"], "pfault_queretaro_surface_size")
-        top = min(_QRO_DZ, tc / f)
+        top = min(dz, tc / f)
         if not 0.1 <= hs <= top:
             raise InputError(f"-pfault_queretaro_surface_size: must lie in [0.1, {top:.4g}] m (at most the "
                              f"layers' height, and the clay's thickness over the size factor), got {hs:g}; leave "
@@ -423,7 +426,8 @@ def queretaro_mesh(size_factor: float = 1.0, **params: Any) -> SerialMesh:
     The domain is 600 times wider than deep, and the paper's counts (57,050 nodes for 900 km^2) mean
     elements hundreds of metres wide: the land surface is triangulated in 2-D (Frontal-Delaunay) with a
     size field, and the triangles are extruded downwards into prisms split into three tetrahedra each,
-    in layers of about 7.1 m (3 in the clay, 4 in the sand at size_factor 1). Flat elements in horizontal
+    in layers ``layer_thickness`` high (times ``size_factor``, rounded to whole layers in the clay and in the
+    sand; default 50/7 m: 3 in the clay, 4 in the sand at size_factor 1). Flat elements in horizontal
     layers keep the layer interfaces, the fault and the vertical resolution exact whatever the lateral
     size. ``surface_size`` (default: none) grades the layers towards the land surface: the top layer is
     ``surface_size`` high (times ``size_factor``), the layers below grow by 0.5 m per metre of depth up to the
@@ -464,11 +468,12 @@ def _queretaro_volumes(occ, p, f):
     sed = occ.addRectangle(xf, 0.0, 0.0, lx - xf, ly)
     top, _ = occ.fragment([(2, rock)], [(2, sed)])
     top = sorted(dt for dt in top if dt[0] == 2)
+    dz = p["layer_thickness"]
     if p["surface_size"] is None:
-        clay = dict(numElements=[max(1, int(round(tc / (_QRO_DZ * f))))])
-        sand = dict(numElements=[max(1, int(round(ts / (_QRO_DZ * f))))])
+        clay = dict(numElements=[max(1, int(round(tc / (dz * f))))])
+        sand = dict(numElements=[max(1, int(round(ts / (dz * f))))])
     else:
-        z = graded_layers(p["surface_size"] * f, _QRO_DZ * f, _QRO_DZ_GROWTH, (tc, depth))
+        z = graded_layers(p["surface_size"] * f, dz * f, _QRO_DZ_GROWTH, (tc, depth))
         clay, sand = (dict(numElements=[1] * len(b), heights=list((b - a) / (b[-1] - a)))
                       for a, b in ((0.0, z[(z > 0) & (z <= tc)]), (tc, z[z > tc])))
     out1 = occ.extrude(top, 0.0, 0.0, -tc, recombine=False, **clay)

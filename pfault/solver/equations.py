@@ -16,6 +16,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..physics import elasticity as el
+from ..physics import geostatic as gs
 from .loads import Loads
 from .setup import rigid_body_modes
 

@@ -15,6 +15,9 @@ equations and the output read it with ``cell_dp(t)``, which changes nothing. Eve
 - ``has_state``; ``state()`` / ``restore(state)``: its state (a flow model's ``FlowState``; a table has none: None),
   which the run's state records after every advance and a restart gives back;
 - ``destroy()``.
+
+``Unchanged`` gives any source the materials whose pore pressure does not change
+(-pfault_pore_pressure_unchanged_materials): it is the source, with zero change in their cells.
 """
 
 from __future__ import annotations
@@ -165,3 +168,41 @@ class FlowSource:
 
     def destroy(self) -> None:
         self.flow.destroy()
+
+
+class Unchanged:
+    """The pore-pressure change of ``source`` except in the cells of ``unchanged`` (bool per local cell), where the
+    pore pressure stays at its initial value (the materials of -pfault_pore_pressure_unchanged_materials: an
+    impermeable rock, a clay the wells do not drain): no Biot load there, nor at the fault faces whose minus cell
+    it is, and zero in the output's pore_pressure_change. Everything else (advancing, the flow model's head and
+    records, its checkpoint) is the source's."""
+
+    def __init__(self, source: Any, unchanged: np.ndarray) -> None:
+        self.source = source
+        self.unchanged = np.asarray(unchanged, dtype=bool)
+        self.has_state = source.has_state
+
+    @property
+    def active(self) -> bool:
+        return self.source.active
+
+    def advance_to(self, t: float) -> None:
+        self.source.advance_to(t)
+
+    def cell_dp(self, t: float) -> np.ndarray:
+        return np.where(self.unchanged, 0.0, self.source.cell_dp(t))
+
+    def step_record(self) -> dict:
+        return self.source.step_record()
+
+    def vertex_head(self) -> np.ndarray | None:
+        return self.source.vertex_head()
+
+    def checkpoint(self) -> Any:
+        return self.source.checkpoint()
+
+    def restore(self, *args: Any) -> None:
+        self.source.restore(*args)
+
+    def destroy(self) -> None:
+        self.source.destroy()

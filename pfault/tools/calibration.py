@@ -23,7 +23,7 @@ value p ln(10) se is reported too.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -61,6 +61,7 @@ class Problem:
     ranks: int = 1
     timeout: float | None = None
     log: object = print                  # one line per run
+    runner: Callable[[Iterable[Run], int], list[RunResult]] = run_many   # makes the runs (workers side by side)
     evaluations: list[Evaluation] = field(default_factory=list)
     _cache: dict = field(default_factory=dict)
 
@@ -91,7 +92,7 @@ class Problem:
         runs = [Run(self.scene, os.path.join(self.run_dir, f"{n:04d}"),
                     self.overrides(self.to_values(np.frombuffer(key))), self.ranks, False, self.timeout)
                 for n, key in zip(numbers, new)]
-        for n, key, result in zip(numbers, new, run_many(runs, self.workers)):
+        for n, key, result in zip(numbers, new, self.runner(runs, self.workers)):
             ev = self._evaluation(n, purpose, self.to_values(np.frombuffer(key)), result)
             self._cache[key] = ev
             self.evaluations.append(ev)

@@ -229,6 +229,16 @@ CASES = [
         "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_fault_fault_tensile_strength",
         "50*kPa", "-pfault_fault_fault_cohesion", "20*kPa", "-pfault_fault_fault_residual_cohesion", "30*kPa"], 1,
         "-pfault_fault_fault_residual_cohesion: must lie in [0, the cohesion 20000 Pa]"),
+    Case("unchanged_pore_pressure_of_no_material", scene("-pfault_pore_pressure_unchanged_materials", "clay"), 1,
+         "-pfault_pore_pressure_unchanged_materials: 'clay' is not a material of the mesh (materials: soil)"),
+    Case("unchanged_pore_pressure_of_a_material_with_a_table",
+         scene("-pfault_pore_pressure_unchanged_materials", "soil"), 1,
+         "-pfault_pore_pressure_unchanged_materials: soil has a head_drawdown or pressure_change table of its own"),
+    Case("unchanged_pore_pressure_in_a_scene_without_one", lambda tmp, out, ranks: [
+        "-m", "pfault", TWO_BLOCKS, "-pfault_output_dir", str(out), "-pfault_pore_pressure_unchanged_materials",
+        "rock"], 1, "-pfault_pore_pressure_unchanged_materials: the scene changes no pore pressure"),
+    Case("geostatic_stress_without_a_geostatic_start", scene("-pfault_geostatic_stress", "lithostatic"), 1,
+         "-pfault_geostatic_stress: sets the initial stress of a geostatic start; add -pfault_geostatic true"),
     # output: exit 4 (1 for an empty name), found before the first solve
     Case("output_in_proc", lambda tmp, out, ranks: ["-m", "pfault", OED, "-pfault_output_dir", "/proc/pfault_out"], 4,
          "-pfault_output_dir /proc/pfault_out: cannot create files in '/proc'"),

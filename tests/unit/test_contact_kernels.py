@@ -191,6 +191,33 @@ def test_tensile_strength():
     assert np.isclose(s[0], 1e5 / TAN30) and s[1] == 0 and s[2] == 0 and np.isinf(s[3])
 
 
+def test_a_cutoff_at_zero_opens_at_zero_normal_traction():
+    """FaceLaw.apex False (-pfault_fault_<name>_tension_cutoff zero): a cohesive face (c = 100 kPa, apex 173 kPa)
+    is closed 1 Pa below t_N = 0 and open 1 Pa above it, where the apex law (FaceLaw's default) keeps it closed and
+    stuck; its open rows are A t (no tension, no shear); the Lagrange and penalty laws agree; the derivatives of the
+    open rows against finite differences."""
+    n = 4
+    coh = np.full(n, 1e5)
+    apex = ct.FaceLaw(np.full(n, 2.0), coh, np.full(n, TAN30), np.full(n, 1e6), np.full(n, 0.7e6))
+    zero = ct.FaceLaw(apex.area, coh, apex.tan_phi, apex.c_n, apex.c_t, np.zeros(n, dtype=bool))
+    assert np.all(apex.apex) and np.array_equal(ct.tension_cutoff(apex), ct.tensile_strength(coh, apex.tan_phi))
+    assert np.all(ct.tension_cutoff(zero) == 0.0)
+    z = np.zeros((n, 3))
+    t = np.zeros((n, 3))
+    t[:, 0] = [-1.0, 1.0, -1.0, 1.0]
+    t[:, 1] = 0.5e5                                      # half the cohesion: inside the cone
+    assert list(ct.states(zero, z, z, t)) == [ct.STICK, ct.OPEN] * 2
+    assert list(ct.states(apex, z, z, t)) == [ct.STICK] * 4
+    st, r, dg, dt = ct.lagrange_rows(zero, z, z, t)
+    opn = st == ct.OPEN
+    assert np.array_equal(r[opn], (zero.area[:, None] * t)[opn])
+    assert fd_check(lambda x: ct.lagrange_rows(zero, z, z, x, state=st)[1], t, dt, h=1e-2) < 1e-6
+    g = np.zeros((n, 3))
+    g[:, 0] = [-1e-6, 1e-6, -1e-6, 1e-6]                 # the penalty trial t_N = c_N g_N: -1 and +1 Pa
+    _, _, pst = ct.penalty_traction(zero, g, z, np.zeros((n, 3)))
+    assert list(pst) == [ct.STICK, ct.OPEN] * 2
+
+
 def test_fresh_fault_starts_closed():
     """No traction, no jump: the face is closed and stuck (a glued fault), not open."""
     lw = law(3)

@@ -197,6 +197,15 @@ def test_queretaro_surface_size_grades_the_rows_beside_the_fault(queretaro, surf
     assert np.allclose(np.diff(_fault_rows(queretaro)), [20.0, 30.0])
 
 
+def test_queretaro_layer_thickness_sets_the_rows(queretaro):
+    """Layers a quarter as thick (50/28 m at size factor 3: 5.36 m) give 4 rows of 5 m in the clay and 6 of 5 m in
+    the sand; the default (50/7 m: 21.4 m) one row in each."""
+    m = geometry.queretaro_mesh(3.0, layer_thickness=50.0 / 28.0)
+    assert np.allclose(_fault_rows(m), np.concatenate([np.linspace(0.0, 20.0, 5), np.linspace(20.0, 50.0, 7)[1:]]))
+    assert np.allclose(_fault_rows(queretaro), [0.0, 20.0, 50.0])
+    assert len(m.tets) > 4 * len(queretaro.tets)
+
+
 @pytest.mark.parametrize("build,kwargs,option", [
     (geometry.wuxi_mesh, {"size_factor": 0.0}, "-pfault_mesh_size_factor"),
     (geometry.wuxi_mesh, {"size_factor": "x"}, "-pfault_mesh_size_factor"),
@@ -218,6 +227,10 @@ def test_queretaro_surface_size_grades_the_rows_beside_the_fault(queretaro, surf
     (geometry.queretaro_mesh, {"surface_size": 3.0, "clay_thickness": 2.0}, "-pfault_queretaro_surface_size"),
     (geometry.queretaro_mesh, {"surface_size": 7.0, "size_factor": 3.0}, "-pfault_queretaro_surface_size"),
     (geometry.queretaro_mesh, {"surface_size": "x"}, "-pfault_queretaro_surface_size"),
+    (geometry.queretaro_mesh, {"surface_size": 2.0, "layer_thickness": 1.5}, "-pfault_queretaro_surface_size"),
+    (geometry.queretaro_mesh, {"layer_thickness": 0.05}, "-pfault_queretaro_layer_thickness"),
+    (geometry.queretaro_mesh, {"layer_thickness": 60.0}, "-pfault_queretaro_layer_thickness"),
+    (geometry.queretaro_mesh, {"layer_thickness": "x"}, "-pfault_queretaro_layer_thickness"),
     (geometry.queretaro_mesh, {"wells": [12000.0, 12000.0, 13000.0]}, "-pfault_queretaro_wells"),
     (geometry.queretaro_mesh, {"wells": [5000.0, 12000.0]}, "-pfault_queretaro_wells"),
 ])

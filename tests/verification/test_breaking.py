@@ -143,6 +143,40 @@ def test_bar_breaks_at_its_tensile_strength(tmp_path, ranks):
     assert f["broken_length_m"] == pytest.approx(1.0, rel=1e-12)     # its trace across the top
 
 
+# the bar across a pre-existing cohesive fault (c = 1 MPa: its apex c / tan(phi) is 1.73 MPa), pressed to -1 kPa of
+# uniaxial stress, then pulled to +1 kPa
+PULL = 1e3                                # Pa
+PRESSED_PULLED = BAR.replace(f"-pfault_fault_fissure_tensile_strength {T}\n", "").replace(
+    f"-pfault_bc_xmax_displacement {STRETCH},0,0", f"-pfault_bc_xmax_displacement {PULL * L / E!r},0,0").replace(
+    f"-pfault_bc_xmax_history 0:0,1:0.5,2:{1 - EPS!r},3:{1 + EPS!r},4:2",
+    "-pfault_bc_xmax_history 0:0,1:-1,2:1").replace("-pfault_time_end 4\n-pfault_time_steps 4",
+                                                    "-pfault_time_end 2\n-pfault_time_steps 2")
+
+
+def test_a_fault_whose_cutoff_is_at_zero_opens_at_zero_normal_traction(tmp_path):
+    """-pfault_fault_<name>_tension_cutoff zero: the cohesive fault, closed and stuck at -1 kPa, opens by the whole
+    stretch with no traction at +1 kPa; with the default cut-off at the apex it stays closed and carries the +1 kPa
+    (1 rank)."""
+    assert "tensile_strength" not in PRESSED_PULLED and "history 0:0,1:-1,2:1" in PRESSED_PULLED
+    scene = write_scene(tmp_path, PRESSED_PULLED, "pulled")
+    for cutoff in ("zero", "apex"):
+        extra = ["-pfault_fault_fissure_tension_cutoff", "zero"] if cutoff == "zero" else []
+        _, s = run_scene(scene, tmp_path / cutoff, extra=extra)
+        assert s["converged"], cutoff
+        steps = fault_steps(tmp_path / cutoff)
+        pressed, pulled = steps[1], steps[2]
+        assert np.all(pressed["state"] == ct.STICK), cutoff
+        assert np.allclose(pressed["traction_normal_effective"], -PULL, rtol=1e-10, atol=0), cutoff
+        if cutoff == "zero":
+            assert np.all(pulled["state"] == ct.OPEN)
+            assert np.allclose(pulled["opening"], PULL * L / E, rtol=1e-10, atol=0)
+            assert np.abs(pulled["traction_normal_effective"]).max() < 1e-9 * PULL
+        else:
+            assert np.all(pulled["state"] == ct.STICK)
+            assert np.allclose(pulled["traction_normal_effective"], PULL, rtol=1e-10, atol=0)
+            assert np.abs(pulled["opening"]).max() < 1e-12 * PULL * L / E
+
+
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_blocks_break_in_shear_on_their_cohesion(tmp_path, ranks):
     scene = write_scene(tmp_path, SHEAR, "shear")
