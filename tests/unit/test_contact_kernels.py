@@ -27,10 +27,10 @@ def fd_check(fun, x, analytic, h=1e-7):
 
 def penalty_traction(law, g, g_prev, t_prev, t0_n):
     """The penalty law, written out as a return map (the reference): t_N = t0_N + k_N g_N while t_N <= T (the
-    tensile strength c / tan(phi)), T when open; the shear's trial t_T^n + k_T (g_T - g_T^n) returned onto the
-    Mohr-Coulomb cone (no shear when open). Returns the traction and the state."""
+    tension cut-off: the apex c / tan(phi), or 0), T when open; the shear's trial t_T^n + k_T (g_T - g_T^n) returned
+    onto the Mohr-Coulomb cone (no shear when open). Returns the traction and the state."""
     kn, kt = law.c_n, law.c_t
-    strength = ct.tensile_strength(law.cohesion, law.tan_phi)
+    strength = ct.tension_cutoff(law)
     tn = t0_n + kn * g[:, 0]
     closed = tn <= strength
     t = np.zeros_like(g)
@@ -214,7 +214,7 @@ def test_a_cutoff_at_zero_opens_at_zero_normal_traction():
     assert fd_check(lambda x: ct.lagrange_rows(zero, z, z, x, state=st)[1], t, dt, h=1e-2) < 1e-6
     g = np.zeros((n, 3))
     g[:, 0] = [-1e-6, 1e-6, -1e-6, 1e-6]                 # the penalty trial t_N = c_N g_N: -1 and +1 Pa
-    _, _, pst = ct.penalty_traction(zero, g, z, np.zeros((n, 3)))
+    _, pst = penalty_traction(zero, g, z, np.zeros((n, 3)), np.zeros(n))
     assert list(pst) == [ct.STICK, ct.OPEN] * 2
 
 
@@ -232,9 +232,10 @@ def test_penalty_faces_rows_vanish_at_the_penalty_law(c):
     traction) the rows are zero and the face is in the law's state, whatever the augmentation c of the rows."""
     n = 300
     k = RNG.uniform(1e8, 1e10, n)
+    apex = np.arange(n) % 3 != 0                        # every third face's cut-off at zero
     pen = ct.FaceLaw(RNG.uniform(0.5, 2.0, n), np.where(np.arange(n) % 2 == 0, 0.0, RNG.uniform(0, 1e5, n)),
-                     np.full(n, TAN30), k, RNG.uniform(0.5, 1.0, n) * k)
-    rows = ct.FaceLaw(pen.area, pen.cohesion, pen.tan_phi, np.full(n, c), np.full(n, 0.7 * c))
+                     np.full(n, TAN30), k, RNG.uniform(0.5, 1.0, n) * k, apex)
+    rows = ct.FaceLaw(pen.area, pen.cohesion, pen.tan_phi, np.full(n, c), np.full(n, 0.7 * c), apex)
     g = RNG.normal(size=(n, 3)) * 1e-4
     g_prev = RNG.normal(size=(n, 3)) * 1e-4
     t0_n = -RNG.uniform(0.0, 2e5, n)
