@@ -68,6 +68,10 @@ class Simulation:
                                 restart_step, metadata={provenance.DATASET: self.inputs})
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
         self.composer.extra.update(self.notes)
+        georef = self.model.scene.georef
+        if georef is not None and (georef.crs is not None or georef.start is not None):
+            self.composer.extra["georef"] = georef.summary()
+        self.gis = observed.gis and georef is not None and georef.crs is not None
 
     @property
     def settings(self) -> Any:
@@ -178,6 +182,11 @@ class Simulation:
         summary["wall_s"] = dict(self.wall)
         if self.comm.rank == 0:
             self.output.finish(summary, self.model.scene.figures)
+            if self.gis and self.output.writer is not None:
+                t0 = time.perf_counter()
+                from .io.gis import write_gis
+                written = write_gis(self.output.writer.dir)
+                PETSc.Sys.Print(f"pfault: {len(written)} GIS files in gis/ in {time.perf_counter() - t0:.1f} s")
 
     def record_failure(self, line: str, code: int) -> None:
         """Rank 0, after every rank failed together (RunOutput.record_failure)."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import run_on_root
+from ..errors import InputError, run_on_root
 from ..paths import beside_scene
 from .insar import InsarObserver, InsarSettings, read_insar_settings
 from .insar import check_continuation as insar_continue
@@ -24,12 +24,17 @@ from .stations import check_continuation as stations_continue
 class ObservationSettings:
     stations_file: str              # -pfault_stations ('' : none)
     insar: InsarSettings | None     # -pfault_insar_los, -pfault_insar_spacing (None: no raster)
+    gis: bool = True                # -pfault_gis: the GIS layers at the end of a run with -pfault_crs
 
 
 def read_observation_settings(reader: Any, scene_file: str = "") -> ObservationSettings:
     """The observation options; a relative station file is taken from the working directory, else beside the
     scene file (pfault.paths.beside_scene)."""
-    return ObservationSettings(beside_scene(reader.get("pfault_stations"), scene_file), read_insar_settings(reader))
+    spacing = reader.get("pfault_map_spacing")      # used by pfault.io.gis from options.txt
+    if spacing is not None and not spacing > 0:
+        raise InputError(f"-pfault_map_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
+    return ObservationSettings(beside_scene(reader.get("pfault_stations"), scene_file),
+                               read_insar_settings(reader, scene_file), reader.get("pfault_gis"))
 
 
 @dataclass(frozen=True)
