@@ -104,6 +104,9 @@ def read_heads_settings(reader: Any, water_density: float, gravity: float, origi
 def open_heads(settings: HeadsSettings) -> tuple[Any, Any]:
     """(the head file's reader, the MODFLOW grid or None); the reader's ``times`` in seconds as ``seconds``."""
     from ..io import head_files
+    from .netcdf_heads import is_mf6_netcdf, open_mf6_netcdf
+    if is_mf6_netcdf(settings.file):
+        return open_mf6_netcdf(settings)
     if settings.grid:
         grid = head_files.scaled(head_files.read_mf6_grid(settings.grid), settings.length_unit)
         heads = head_files.Mf6Heads(settings.file, grid, settings.grid)
@@ -270,7 +273,8 @@ def build_heads_source(comm: Any, settings: HeadsSettings, centroids: np.ndarray
         try:
             ref = reference_index(settings, heads.seconds)
             if grid is not None:
-                table, outside = _mf6_table(heads, grid, points, ref, rho_g, settings.length_unit)
+                table, outside = _mf6_table(heads, grid, points, ref, rho_g,
+                                            getattr(heads, "scale", settings.length_unit))
             else:
                 table, outside = _generic_table(heads, points, ref, rho_g)
             extent = (grid if grid is not None else heads).extent()
