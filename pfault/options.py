@@ -208,7 +208,8 @@ SPECS = [
        "line-of-sight displacement (positive towards the satellite) and its rate at every output time on a raster, "
        "insar_los.nc (CF NetCDF) and insar_los.png"),
     _s("pfault_insar_spacing", "quantity", None, "m", "pixel size of the LOS raster (default: the mean edge length "
-       "of the land surface's triangles); a raster that would not fit in memory is refused"),
+       "of the land surface's triangles; not used with -pfault_insar_grid); a raster that would not fit in memory is "
+       "refused"),
     _s("pfault_insar_grid", "string", "", "", "InSAR product (OPERA DISP-S1 or MintPy layout, NetCDF/HDF5) whose "
        "pixels the LOS raster takes instead of a regular grid: its pixel centres in its CRS, and its per-pixel "
        "line of sight when it has one (los_east, los_north), else -pfault_insar_los"),

@@ -47,8 +47,10 @@ class Simulation:
         try:
             self.observations = Observations.locate(self.model, observed)
             # the data files read, by size and SHA-256 (input_files.json, checkpoint.h5); what summary.json adds
-            self.inputs = provenance.record(self.comm, provenance.scene_files(self.model.scene,
-                                                                              observed.stations_file, options_file))
+            files = provenance.scene_files(self.model.scene, observed.stations_file, options_file)
+            if observed.insar is not None and observed.insar.grid:
+                files.append(("pfault_insar_grid", observed.insar.grid))
+            self.inputs = provenance.record(self.comm, files)
             self.notes = {"pore_pressure": self._coverage()}
             state, solver = self._state_and_solver(self.model)
             # the records, grid index and step offset of the run a restart continues (None: a new run)

@@ -41,14 +41,23 @@ EXAMPLE = "-0.61,-0.11,0.785"       # Sentinel-1 ascending, incidence about 38 d
 
 @dataclass(frozen=True)
 class InsarSettings:
-    los: np.ndarray             # (3,) unit vector east, north, up from the ground to the satellite
+    los: np.ndarray | None      # (3,) unit vector east, north, up from the ground to the satellite (None: the grid's)
     spacing: float | None       # pixel size (m); None: the mean edge length of the land surface's triangles
+    grid: str = ""              # -pfault_insar_grid: an InSAR product whose pixels the raster takes ('' : none)
 
 
 def read_insar_settings(reader: Any, scene_file: str = "") -> InsarSettings | None:
-    """-pfault_insar_los and -pfault_insar_spacing (every rank); None without a LOS vector."""
+    """-pfault_insar_los, -pfault_insar_spacing and -pfault_insar_grid (every rank); None without a LOS vector
+    or a product grid."""
+    from ..paths import beside_scene
     los = reader.get("pfault_insar_los")
     spacing = reader.get("pfault_insar_spacing")
+    grid = beside_scene(reader.get("pfault_insar_grid"), scene_file)
+    if grid:            # the product's pixels: -pfault_insar_spacing, if any, is not used
+        v = np.array(los, dtype=np.float64) if los else None
+        if v is not None:
+            check_los(v)
+        return InsarSettings(None if v is None else v / np.linalg.norm(v), None, grid)
     if not los:
         if spacing is not None:
             raise InputError(f"-pfault_insar_spacing {spacing:g}: no raster without -pfault_insar_los; give the "

@@ -167,3 +167,44 @@ def test_stations_as_gnss_east_north_up_series(run_dir):
         assert e["date"] == when.date().isoformat()
     pts = layer(run_dir, "stations")
     assert [(g.GetX(), g.GetY()) for g, _ in pts] == [xyz["A"], xyz["B"]]
+
+
+def test_los_raster_on_an_insar_products_pixels(run_dir, tmp_path):
+    """-pfault_insar_grid: an OPERA-like product whose pixels are the regular raster's plus a margin gives the same
+    LOS there (its per-pixel LOS equal to the scene's), no-data off the land surface, and the product's CRS."""
+    from pyproj import CRS
+    from pfault.io.insar import read_netcdf
+    from pfault.io.insar_write import write_opera
+    regular = read_netcdf(str(run_dir / "insar_los.nc"))
+    x = np.r_[regular["x"][0] - 25.0, regular["x"], regular["x"][-1] + 25.0]
+    y = np.r_[regular["y"][0] - 25.0, regular["y"], regular["y"][-1] + 25.0]
+    los = np.broadcast_to(regular["los"], (len(y), len(x), 3))
+    when = dt.datetime(2016, 1, 1, tzinfo=dt.timezone.utc)
+    product = write_opera(str(tmp_path / "grid.nc"), x, y, CRS.from_epsg(32650), [when], [when],
+                          np.zeros((1, len(y), len(x))), los)
+    (tmp_path / "st.csv").write_text(STATIONS)
+    extra = [e for e in EXTRA if e not in ("-pfault_insar_los", "-0.618,-0.110,0.778")]
+    _, summary = run_scene(SCENE, tmp_path / "run", extra=extra + ["-pfault_insar_grid", product, "-pfault_gis",
+                                                                    "false"])
+    assert summary["converged"] and not (tmp_path / "run" / "gis").exists()
+    got = read_netcdf(str(tmp_path / "run" / "insar_los.nc"))
+    assert np.array_equal(got["x"], x) and np.array_equal(got["y"], y) and got["los"].shape[1] == 3
+    inner = got["los_displacement"][:, 1:-1, 1:-1]
+    # the same to the float32 of the product's LOS layers (OPERA stores them so)
+    assert np.allclose(inner, regular["los_displacement"], rtol=1e-6, atol=1e-9)
+    edge = np.ones(got["los_displacement"].shape[1:], bool)
+    edge[1:-1, 1:-1] = False
+    assert np.isnan(got["los_displacement"][:, edge]).all()
+    assert CRS.from_wkt(got["grid_mapping"]["crs_wkt"]).to_epsg() == 32650
+
+
+def test_product_and_scene_crs_must_both_be_given(tmp_path):
+    from pyproj import CRS
+    from pfault.errors import InputError
+    from pfault.io.insar_grid import locate_product_pixels
+    from pfault.io.insar_write import write_opera
+    when = dt.datetime(2016, 1, 1, tzinfo=dt.timezone.utc)
+    x = y = np.array([25.0, 75.0])
+    product = write_opera(str(tmp_path / "p.nc"), x, y, CRS.from_epsg(32650), [when], [when], np.zeros((1, 2, 2)))
+    with pytest.raises(InputError, match="the product is in WGS 84 / UTM zone 50N but the scene has no -pfault_crs"):
+        locate_product_pixels(None, "top", product, (0, 0, 0), None, np.array([0.0, 0.0, 1.0]))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pyproj import CRS, Transformer
 
-from mf6_netcdf import mesh, structured
+from pfault.io.mf6_netcdf_write import mesh, structured
 from pfault.errors import InputError
 from pfault.sources.heads import HeadsSettings
 from pfault.sources.netcdf_heads import Reprojected, open_mf6_netcdf
