@@ -54,3 +54,15 @@ def test_oedometer_settlement_through_modflow_netcdf_heads(tmp_path, layout):
         from osgeo import gdal
         a = gdal.Open(str(tmp_path / "out1" / "gis" / "subsidence.tif")).ReadAsArray()
         assert a.shape == (4, 4) and np.allclose(a, EXACT, rtol=1e-8)
+
+
+def test_site_example_netcdf_heads_in_their_own_crs_equal_the_binary_files(tmp_path):
+    """config/site_example: site.nc (a layered mesh in CGCS2000 Gauss-Kruger, reprojected into the scene's UTM zone)
+    gives the run of site.hds + site.dis.grb (the same model in site coordinates) to round-off."""
+    from conftest import compare_runs, run_scene
+    _, nc = run_scene("config/site_example/site.opts", tmp_path / "nc")
+    _, binary = run_scene("config/site_example/site.opts", tmp_path / "bin", extra=[
+        "-pfault_heads_file", "config/site_example/site.hds", "-pfault_heads_grid", "config/site_example/site.dis.grb",
+        "-pfault_heads_time_unit", "day"])
+    assert nc["max_subsidence_m"] == pytest.approx(1.28872, abs=1e-5)
+    assert compare_runs(tmp_path / "nc", tmp_path / "bin", 1e-12) < 1e-12
