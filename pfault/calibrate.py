@@ -34,8 +34,13 @@ def parser() -> argparse.ArgumentParser:
                                 "model).")
     p.add_argument("scene", help="the scene (a pfault options file with -pfault_stations)")
     p.add_argument("--parameters", required=True, help="CSV: name,option,start,lower,upper[,transform][,value]")
-    p.add_argument("--observations", required=True, help="CSV: name,time,ux,uy,uz,sigma (m, s; components may be "
-                   "empty)")
+    p.add_argument("--observations", help="CSV: name,time,ux,uy,uz,sigma (m, s; components may be empty)")
+    p.add_argument("--insar", help="InSAR displacement time series (OPERA DISP-S1 NetCDF or MintPy timeseries.h5) "
+                   "fitted at its pixels; the scene needs -pfault_start_date (and -pfault_crs for a product in a CRS)")
+    p.add_argument("--insar-sigma", default="", help="standard deviation of an InSAR value (m, or with a unit: "
+                   "5*mm); required with --insar")
+    p.add_argument("--insar-reference", default="offset", help="'offset' (a constant per date, fitted; the "
+                   "default) or x,y: the reference point in the product's CRS")
     p.add_argument("--workers", type=int, default=1, help="forward runs side by side (default 1)")
     p.add_argument("--ranks", type=int, default=1, help="MPI ranks of each forward run (default 1)")
     p.add_argument("--output", help="output directory (default runs/calibrate_<scene>)")
@@ -64,11 +69,37 @@ def _check_output(out: str) -> str | None:
 
 
 def _inputs(args):
-    from .tools.calibration_input import read_observations, read_parameters, scene_facts
-    facts = scene_facts(args.scene)
+    from .tools.calibration_input import (CalibrationInputError, empty_observations, read_observations,
+                                          read_parameters, scene_facts)
+    if not args.observations and not args.insar:
+        raise CalibrationInputError("give --observations (station series) or --insar (an InSAR time series), or both")
+    facts = scene_facts(args.scene, need_stations=bool(args.observations))
     params = read_parameters(args.parameters)
-    obs = read_observations(args.observations, facts.stations, facts.station_file, facts.time_end)
-    return params, obs
+    obs = (read_observations(args.observations, facts.stations, facts.station_file, facts.time_end)
+           if args.observations else empty_observations())
+    return params, obs, _insar(args, facts) if args.insar else None
+
+
+def _insar(args, facts):
+    """The InSAR observations (pfault.tools.insar_fit), every InputError as a CalibrationInputError."""
+    from .errors import InputError
+    from .georef import parse_date
+    from .tools.calibration_input import CalibrationInputError
+    from .tools.insar_fit import InsarSettings, InsarTerm, parse_reference
+    from .units import parse_quantity
+    try:
+        if not facts.start_date:
+            raise InputError(f"--insar {args.insar}: the scene {args.scene} has no -pfault_start_date, so the "
+                             "product's dates cannot be placed in the run; add it (the date of the scene's time 0)")
+        if not args.insar_sigma:
+            raise InputError("--insar-sigma: give the standard deviation of an InSAR value, e.g. 5*mm")
+        sigma = parse_quantity(args.insar_sigma, "insar-sigma", "m")
+        if not sigma > 0:
+            raise InputError(f"--insar-sigma {args.insar_sigma}: must be > 0 (m)")
+        settings = InsarSettings(args.insar, sigma, parse_reference(args.insar_reference))
+        return InsarTerm(settings, parse_date(facts.start_date, "-pfault_start_date"), facts.time_end)
+    except InputError as exc:
+        raise CalibrationInputError(str(exc)) from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -79,12 +110,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.workers < 1 or args.ranks < 1:
         return _fail("--workers and --ranks must be at least 1", EXIT_INPUT)
     try:
-        params, obs = _inputs(args)
+        params, obs, insar = _inputs(args)
     except CalibrationInputError as exc:
         return _fail(str(exc), EXIT_INPUT)
-    if len(obs.value) <= len(params):
-        return _fail(f"observation file {args.observations}: {len(obs.value)} measured components for "
-                     f"{len(params)} parameters; give more observations than parameters", EXIT_INPUT)
+    measured = len(obs.value) + (insar.count() - insar.nuisance if insar is not None else 0)
+    if measured <= len(params):
+        what = f"observation file {args.observations}" if insar is None else "the observations"
+        unit = "components" if insar is None else "values"
+        return _fail(f"{what}: {measured} measured {unit} for {len(params)} parameters; give more observations "
+                     "than parameters", EXIT_INPUT)
+    if args.pest and insar is not None:
+        return _fail("--pest with --insar: the PEST files hold station observations only; fit the InSAR series "
+                     "with the built-in loop (without --pest)", EXIT_INPUT)
     if args.pest:
         return _write_pest(args, params, obs)
     out = args.output or os.path.join("runs", "calibrate_" + os.path.splitext(os.path.basename(args.scene))[0])
@@ -100,9 +137,10 @@ def main(argv: list[str] | None = None) -> int:
         write_runs(out, problem)
 
     problem = Problem(args.scene, params, obs, os.path.join(out, "runs"), args.workers, args.ranks, args.timeout,
-                      log)
+                      log, insar)
+    more = f" and {insar.count()} InSAR values on {insar.dates} dates" if insar is not None else ""
     print(f"{PROG}: {len(params)} parameters, {len(obs.value)} measured components at "
-          f"{len(obs.stations)} stations; runs in {out}/runs, {args.workers} at a time", flush=True)
+          f"{len(obs.stations)} stations{more}; runs in {out}/runs, {args.workers} at a time", flush=True)
     t0 = time.perf_counter()
     try:
         result = fit(problem, args.max_iterations)

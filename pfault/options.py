@@ -200,6 +200,12 @@ SPECS = [
        "every cell)", choices=("error", "zero")),
     _s("pfault_mesh_origin", "list", "0,0,0", "m", "site coordinates of the mesh's origin: site = mesh + origin "
        "(the coordinates of the groundwater model and of other site data)"),
+    _s("pfault_crs", "string", "", "", "coordinate reference system of the site coordinates: an EPSG code "
+       "(EPSG:32650), a .prj/.wkt file or a WKT string; a projected CRS in metres. With it every raster is also a "
+       "GeoTIFF, the CF NetCDF files carry it, and gis/ holds the fault, fissure and hazard layers and the stations "
+       "as east/north/up series; heads in another CRS are reprojected"),
+    _s("pfault_start_date", "string", "", "", "calendar date of the scene's time 0, ISO 8601 (2015-01-01, "
+       "2015-01-01T06:00:00; UTC): outputs give dates, and InSAR dates are placed in the run"),
     # time
     _s("pfault_time_end", "quantity", 1.0, "s", "end time (units allowed, e.g. 10*year)"),
     _s("pfault_time_steps", "int", 1, "", "number of equal time steps"),
@@ -225,7 +231,16 @@ SPECS = [
        "line-of-sight displacement (positive towards the satellite) and its rate at every output time on a raster, "
        "insar_los.nc (CF NetCDF) and insar_los.png"),
     _s("pfault_insar_spacing", "quantity", None, "m", "pixel size of the LOS raster (default: the mean edge length "
-       "of the land surface's triangles); a raster that would not fit in memory is refused"),
+       "of the land surface's triangles; not used with -pfault_insar_grid); a raster that would not fit in memory is "
+       "refused"),
+    _s("pfault_insar_grid", "string", "", "", "InSAR product (OPERA DISP-S1 or MintPy layout, NetCDF/HDF5) whose "
+       "pixels the LOS raster takes instead of a regular grid: its pixel centres in its CRS, and its per-pixel "
+       "line of sight when it has one (los_east, los_north), else -pfault_insar_los"),
+    _s("pfault_map_spacing", "quantity", None, "m", "pixel size of the land surface's maps in gis/ (subsidence, "
+       "horizontal strain, angular distortion; default: -pfault_insar_spacing when given, else the mean edge length "
+       "of the land surface's triangles)"),
+    _s("pfault_gis", "bool", True, "", "with -pfault_crs, write the GIS layers (gis/: GeoTIFFs, GeoPackage, "
+       "stations' east/north/up series) at the end of the run"),
     _s("pfault_hazard_strain_threshold", "quantity", 2e-4, "", "horizontal tensile strain of the land surface "
        "above which it is fissure-prone (2e-4: within the 1e-4 to 7e-4 measured across active earth fissures): "
        "summary.json's fissure-prone length and area"),

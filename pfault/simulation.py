@@ -47,8 +47,10 @@ class Simulation:
         try:
             self.observations = Observations.locate(self.model, observed)
             # the data files read, by size and SHA-256 (input_files.json, checkpoint.h5); what summary.json adds
-            self.inputs = provenance.record(self.comm, provenance.scene_files(self.model.scene,
-                                                                              observed.stations_file, options_file))
+            files = provenance.scene_files(self.model.scene, observed.stations_file, options_file)
+            if observed.insar is not None and observed.insar.grid:
+                files.append(("pfault_insar_grid", observed.insar.grid))
+            self.inputs = provenance.record(self.comm, files)
             self.notes = {"pore_pressure": self._coverage()}
             state, solver = self._state_and_solver(self.model)
             # the records, grid index and step offset of the run a restart continues (None: a new run)
@@ -68,6 +70,10 @@ class Simulation:
                                 restart_step, metadata={provenance.DATASET: self.inputs})
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
         self.composer.extra.update(self.notes)
+        georef = self.model.scene.georef
+        if georef is not None and (georef.crs is not None or georef.start is not None):
+            self.composer.extra["georef"] = georef.summary()
+        self.gis = observed.gis and georef is not None and georef.crs is not None
 
     @property
     def settings(self) -> Any:
@@ -178,6 +184,11 @@ class Simulation:
         summary["wall_s"] = dict(self.wall)
         if self.comm.rank == 0:
             self.output.finish(summary, self.model.scene.figures)
+            if self.gis and self.output.writer is not None:
+                t0 = time.perf_counter()
+                from .io.gis import write_gis
+                written = write_gis(self.output.writer.dir)
+                PETSc.Sys.Print(f"pfault: {len(written)} GIS files in gis/ in {time.perf_counter() - t0:.1f} s")
 
     def record_failure(self, line: str, code: int) -> None:
         """Rank 0, after every rank failed together (RunOutput.record_failure)."""

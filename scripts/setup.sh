@@ -2,8 +2,10 @@
 # Installs what pfault needs on Debian 12, once: Debian's PETSc stack, OpenBLAS, and a venv
 # (system site packages) holding pfault (editable) and what it takes from PyPI: gmsh, meshio, scipy (spatial
 # fields, least squares of python -m pfault.calibrate), pytest, matplotlib (figures), flopy (MODFLOW head and grid
-# files), h5netcdf (the InSAR raster, NetCDF-4 through h5py), netCDF4 (the tests read the raster back with the
-# netCDF library) and pyemu (the tests read the calibration's PEST++ files back). Optional: PFAULT_GETFEM=1 also
+# files), h5netcdf (the InSAR raster, NetCDF-4 through h5py), pyproj (-pfault_crs: PROJ's coordinate reference
+# systems), rasterio (GeoTIFFs), netCDF4 (the tests read the raster back with the netCDF library), xarray (the tests
+# write MODFLOW 6 NetCDF heads) and pyemu (the tests read the calibration's PEST++ files back); Debian's GDAL
+# (gdal-bin, python3-gdal: the tests read the GIS layers back as QGIS does). Optional: PFAULT_GETFEM=1 also
 # installs Debian's python3-getfem, the peer code of benchmarks/frictional_crack.py (the venv sees it).
 # Seconds when ready.
 set -euo pipefail
@@ -11,6 +13,7 @@ cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 PKGS="python3-petsc4py-real python3-petsc4py python3-mpi4py python3-h5py-mpi petsc-dev python3-venv libopenblas0-pthread"
+PKGS="$PKGS gdal-bin python3-gdal"
 if [ "${PFAULT_GETFEM:-0}" = "1" ]; then PKGS="$PKGS python3-getfem"; fi
 missing=""
 for p in $PKGS; do
@@ -25,8 +28,8 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv (with system site packages: Debian's petsc4py, mpi4py, numpy, h5py)"
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
-PYPI="gmsh meshio scipy>=1.10,<1.12 pytest matplotlib flopy h5netcdf netCDF4 pyemu"
-if ! .venv/bin/python -c "import gmsh, meshio, scipy, pytest, matplotlib, flopy, h5netcdf, netCDF4, pyemu" >/dev/null 2>&1; then
+PYPI="gmsh meshio scipy>=1.10,<1.12 pytest matplotlib flopy h5netcdf netCDF4 pyemu pyproj>=3.6 rasterio>=1.3 xarray"
+if ! .venv/bin/python -c "import gmsh, meshio, scipy, pytest, matplotlib, flopy, h5netcdf, netCDF4, pyemu, pyproj, rasterio, xarray" >/dev/null 2>&1; then
   echo "setup: installing $PYPI into .venv"
   # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command; scipy held to the
   # series tested with Debian 12's numpy 1.24 (1.10-1.11; scipy 1.16 and later cannot install beside it)

@@ -1,7 +1,9 @@
-"""Writes the MODFLOW 6 files of the example site (site.dis.grb, site.hds) from NumPy.
+"""Writes the MODFLOW 6 files of the example site from NumPy: the binary grid and head files (site.dis.grb, site.hds)
+and the same heads as MODFLOW 6's NetCDF output (site.nc: a UGRID layered mesh with its CRS).
 
 MODFLOW 6 itself is not needed: pfault.io.mf6_write writes the binary grid and head files in the layouts of the
-MODFLOW 6 input/output guide, and flopy reads them as it reads MODFLOW's own. The model:
+MODFLOW 6 input/output guide, and flopy reads them as it reads MODFLOW's own; pfault.io.mf6_netcdf_write writes the
+NetCDF file with xarray as MODFLOW 6's NETCDF_MESH2D output does. The model:
 
 - DIS grid of 30 columns x 20 rows of 100 m, rotated 20 degrees counter-clockwise about its lower-left corner,
   which sits so that the grid's centre is the mesh's centre at site (501000, 3500500); three layers: a clay
@@ -10,7 +12,10 @@ MODFLOW 6 input/output guide, and flopy reads them as it reads MODFLOW's own. Th
 - TDIS in days: a steady-state first period of one day (heads at rest, 3 m above datum), then ten years of
   pumping saved once a year;
 - a well in the aquifer at site (501300, 3500600) lowers its heads by S(t) ln(R/r) / ln(R/r_w) (R = 3 km,
-  r_w = 50 m, S growing linearly to 30 m in ten years); the clay above follows with half of it.
+  r_w = 50 m, S growing linearly to 30 m in ten years); the clay above follows with half of it;
+- site coordinates are WGS 84 / UTM zone 50N (EPSG:32650, the scene's -pfault_crs); the groundwater model's own CRS
+  is CGCS2000 / 3-degree Gauss-Kruger CM 114E (EPSG:4547), in which site.nc gives its cells' corners (pyproj), so
+  that the run reprojects them; its times are days since 2015-01-01, the scene's -pfault_start_date.
 
 Run from the repository: python config/site_example/make_heads.py
 """
@@ -19,6 +24,9 @@ import os
 
 import numpy as np
 
+from pyproj import CRS, Transformer
+
+from pfault.io.mf6_netcdf_write import mesh
 from pfault.io.mf6_write import write_dis_grb, write_heads
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -30,6 +38,7 @@ LAND, BOTTOMS = 5.0, (-25.0, -85.0, -145.0)
 REST_HEAD = 3.0
 MAX_DRAWDOWN, R_OUTER, R_WELL = 30.0, 3000.0, 50.0
 YEAR_DAYS = 365.25
+SITE_CRS, MODEL_CRS = 32650, 4547
 
 
 def rotate(v, degrees):
@@ -55,6 +64,20 @@ def main():
         s = MAX_DRAWDOWN * (t - 1.0) / (10 * YEAR_DAYS) * shape
         heads.append(np.stack([REST_HEAD - 0.5 * s, REST_HEAD - s, REST_HEAD - s]))
     write_heads(os.path.join(HERE, "site.hds"), times, np.array(heads), kper=[1] + [2] * 10)
+    write_netcdf(origin, times, np.array(heads), top, botm)
+
+
+def write_netcdf(origin, times, heads, top, botm):
+    """site.nc: the cells as a UGRID layered mesh (counter-clockwise corners, rows from the north as MODFLOW's), in
+    the model's CRS."""
+    i, j = np.meshgrid(np.arange(NCOL + 1), np.arange(NROW + 1))           # corner (column, row from the north)
+    corners = rotate(np.stack([i * CELL, (NROW - j) * CELL], axis=-1).astype(float), ANGROT) + origin
+    x, y = Transformer.from_crs(CRS.from_epsg(SITE_CRS), CRS.from_epsg(MODEL_CRS), always_xy=True).transform(
+        corners[..., 0].ravel(), corners[..., 1].ravel())
+    node = np.arange((NROW + 1) * (NCOL + 1)).reshape(NROW + 1, NCOL + 1)
+    faces = np.stack([node[1:, :-1], node[1:, 1:], node[:-1, 1:], node[:-1, :-1]], axis=-1).reshape(-1, 4)
+    mesh(os.path.join(HERE, "site.nc"), times, heads.reshape(len(times), 3, -1), np.column_stack([x, y]), faces,
+         top.ravel(), botm.reshape(3, -1), crs=CRS.from_epsg(MODEL_CRS), time_units="days since 2015-01-01T00:00:00")
 
 
 if __name__ == "__main__":

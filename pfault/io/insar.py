@@ -41,14 +41,23 @@ EXAMPLE = "-0.61,-0.11,0.785"       # Sentinel-1 ascending, incidence about 38 d
 
 @dataclass(frozen=True)
 class InsarSettings:
-    los: np.ndarray             # (3,) unit vector east, north, up from the ground to the satellite
+    los: np.ndarray | None      # (3,) unit vector east, north, up from the ground to the satellite (None: the grid's)
     spacing: float | None       # pixel size (m); None: the mean edge length of the land surface's triangles
+    grid: str = ""              # -pfault_insar_grid: an InSAR product whose pixels the raster takes ('' : none)
 
 
-def read_insar_settings(reader: Any) -> InsarSettings | None:
-    """-pfault_insar_los and -pfault_insar_spacing (every rank); None without a LOS vector."""
+def read_insar_settings(reader: Any, scene_file: str = "") -> InsarSettings | None:
+    """-pfault_insar_los, -pfault_insar_spacing and -pfault_insar_grid (every rank); None without a LOS vector
+    or a product grid."""
+    from ..paths import beside_scene
     los = reader.get("pfault_insar_los")
     spacing = reader.get("pfault_insar_spacing")
+    grid = beside_scene(reader.get("pfault_insar_grid"), scene_file)
+    if grid:            # the product's pixels: -pfault_insar_spacing, if any, is not used
+        v = np.array(los, dtype=np.float64) if los else None
+        if v is not None:
+            check_los(v)
+        return InsarSettings(None if v is None else v / np.linalg.norm(v), None, grid)
     if not los:
         if spacing is not None:
             raise InputError(f"-pfault_insar_spacing {spacing:g}: no raster without -pfault_insar_los; give the "
@@ -93,7 +102,7 @@ def check_continuation(raster: Raster, los: np.ndarray, run_dir: str) -> dict[st
                          "continue it without -pfault_insar_los, or run the scene from the start with it")
     old = read_netcdf(path)
     same = (np.array_equal(old["x"], raster.x) and np.array_equal(old["y"], raster.y)
-            and np.allclose(old["los"], los, rtol=0, atol=1e-12))
+            and np.shape(old["los"]) == np.shape(los) and np.allclose(old["los"], los, rtol=0, atol=1e-12))
     if not same:
         raise InputError(f"-pfault_insar_los: the LOS vector or the pixels differ from those of the run in "
                          f"-pfault_restart {run_dir}; give the -pfault_insar_los and -pfault_insar_spacing it had")
@@ -105,8 +114,9 @@ class InsarSeries:
     a restart continues), then one time appended in place per output time (the file is closed after each, so a
     reader sees every time written). The last map and its time are kept for the velocity."""
 
-    def __init__(self, raster: Raster, los: np.ndarray) -> None:
+    def __init__(self, raster: Raster, los: np.ndarray, crs: Any = None, start: Any = None) -> None:
         self.raster, self.los = raster, los
+        self.crs, self.start_date = crs, start      # the raster's CRS and the scene's start date (pfault.georef)
         self.last: tuple[float, np.ndarray] | None = None
 
     def start(self, directory: str, restart_dir: str | None, restart_step: int | None) -> None:
@@ -114,7 +124,8 @@ class InsarSeries:
             steps, times, maps = self._continue(restart_dir, int(restart_step or 0))
         else:
             steps, times, maps = [0], [0.0], np.where(self.raster.inside, 0.0, np.nan)[None]
-        write_netcdf(os.path.join(directory, NC_NAME), self.raster, self.los, steps, times, maps)
+        write_netcdf(os.path.join(directory, NC_NAME), self.raster, self.los, steps, times, maps, self.crs,
+                     self.start_date)
         self.last = (float(times[-1]), maps[-1])
 
     def _continue(self, run_dir: str, last_step: int) -> tuple:
@@ -125,7 +136,7 @@ class InsarSeries:
     def append(self, directory: str, step: int, t: float, u: np.ndarray) -> None:
         """``u`` (k, 3): the displacement at the pixels inside the land surface."""
         los = np.full(self.raster.inside.shape, np.nan)
-        los[self.raster.inside] = u @ self.los
+        los[self.raster.inside] = u @ self.los if self.los.ndim == 1 else np.einsum("kc,kc->k", u, self.los)
         t_prev, prev = self.last
         append_netcdf(os.path.join(directory, NC_NAME), step, t, los, (los - prev) / (t - t_prev))
         self.last = (float(t), los)
@@ -139,11 +150,15 @@ def velocities(times: np.ndarray, maps: np.ndarray) -> np.ndarray:
     return rate
 
 
-def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int], times: Sequence[float], maps: np.ndarray) -> None:
+def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int], times: Sequence[float],
+                 maps: np.ndarray, crs: Any = None, start: Any = None) -> None:
     """``insar_los.nc`` (CF-1.8, NetCDF-4 through h5netcdf) with the given times, written into ``path``.tmp and
-    renamed; its time dimension is unlimited (``append_netcdf``)."""
+    renamed; its time dimension is unlimited (``append_netcdf``). With ``crs`` (pyproj) the grid mapping
+    ``spatial_ref`` places x, y; with ``start`` (the scene's start date) the times are CF dates; a per-pixel LOS
+    ``los`` ((k, 3), the pixels inside) is written as ``los_east``, ``los_north``, ``los_up``."""
     import h5netcdf
     import pfault
+    from ..georef import cf_time_units
     disp = np.asarray(maps, dtype=np.float64)
     t = np.asarray(times, dtype=np.float64)
     tmp = path + ".tmp"
@@ -151,7 +166,7 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int
         nc.attrs.update({
             "Conventions": "CF-1.8", "title": "line-of-sight displacement of the land surface",
             "source": f"pfault {pfault.__version__}",
-            "los_unit_vector_enu": los.astype(np.float64),
+            **({"los_unit_vector_enu": los.astype(np.float64)} if los.ndim == 1 else {}),
             "comment": "LOS = e ux + n uy + u uz of the displacement relative to the initial state, positive "
                        "towards the satellite (e, n, u: unit vector from the ground to the satellite); pixels "
                        "outside the land surface hold _FillValue; x, y in site coordinates (m)"})
@@ -164,7 +179,9 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int
         v = nc.create_variable("time", ("time",), np.float64)
         v[:] = t
         # seconds, not "seconds since" a date: a scene has no calendar date, and CF's time axis needs one
-        v.attrs.update({"units": "s", "long_name": "time from the start of the scene"})
+        v.attrs.update({"units": cf_time_units(start), "long_name": "time from the start of the scene"})
+        if start is not None:
+            v.attrs.update({"calendar": "standard", "standard_name": "time"})
         v = nc.create_variable("step", ("time",), np.int64)
         v[:] = np.asarray(steps, dtype=np.int64)
         v.attrs["long_name"] = "pfault step number of the output time"
@@ -177,7 +194,23 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int
             v = nc.create_variable(name, ("time", "y", "x"), np.float64, fillvalue=FILL, chunks=chunks)
             v[:] = np.where(np.isnan(values), FILL, values)
             v.attrs.update({"units": units, "long_name": long})
+        _write_georef(nc, raster, los, crs)
     os.replace(tmp, path)
+
+
+def _write_georef(nc: Any, raster: Raster, los: np.ndarray, crs: Any) -> None:
+    """The grid mapping of ``crs`` (and the data variables' ``grid_mapping``), and a per-pixel LOS."""
+    if crs is not None:
+        from .gis import add_grid_mapping
+        add_grid_mapping(nc, crs)
+        for name in ("los_displacement", "los_velocity"):
+            nc.variables[name].attrs["grid_mapping"] = "spatial_ref"
+    if los.ndim == 2:
+        for k, name in enumerate(("los_east", "los_north", "los_up")):
+            grid = np.full(raster.inside.shape, FILL)
+            grid[raster.inside] = los[:, k]
+            v = nc.create_variable(name, ("y", "x"), np.float64, data=grid, fillvalue=FILL)
+            v.attrs["long_name"] = f"{name[4:]} component of the unit vector from the ground to the satellite"
 
 
 def append_netcdf(path: str, step: int, t: float, los: np.ndarray, rate: np.ndarray) -> None:
@@ -197,7 +230,13 @@ def read_netcdf(path: str) -> dict[str, np.ndarray]:
     import h5netcdf
     with h5netcdf.File(path, "r") as nc:
         out = {k: nc.variables[k][()] for k in ("x", "y", "time", "step", "los_displacement", "los_velocity")}
-        out["los"] = np.asarray(nc.attrs["los_unit_vector_enu"], dtype=np.float64)
+        if "los_unit_vector_enu" in nc.attrs:
+            out["los"] = np.asarray(nc.attrs["los_unit_vector_enu"], dtype=np.float64)
+        else:       # per pixel (k, 3), the pixels inside
+            inside = nc.variables["los_east"][()] != FILL
+            out["los"] = np.column_stack([nc.variables[k][()][inside] for k in ("los_east", "los_north", "los_up")])
+        if "spatial_ref" in nc.variables:
+            out["grid_mapping"] = dict(nc.variables["spatial_ref"].attrs)
     for k in ("los_displacement", "los_velocity"):
         out[k] = np.where(out[k] == FILL, np.nan, out[k])
     return out
@@ -229,8 +268,9 @@ def insar_figure(run_dir: str) -> str | None:
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
-    e, n, u = d["los"]
-    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; LOS (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), "
+    e, n, u = d["los"] if d["los"].ndim == 1 else d["los"].mean(axis=0)
+    which = "LOS" if d["los"].ndim == 1 else "mean LOS of the product's pixels"
+    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; {which} (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), "
                  "positive towards the satellite")
     out = os.path.join(run_dir, PNG_NAME)
     fig.savefig(out + ".tmp", dpi=120, format="png")
@@ -243,11 +283,15 @@ class InsarObserver(Observer):
     """Observer of the time loop (pfault.run): the LOS raster at time 0 (or the times of the run a restart
     continues) and at every output time of a converged step."""
 
-    def __init__(self, output: Any, raster: Raster | None, located: Located, los: np.ndarray) -> None:
+    def __init__(self, output: Any, raster: Raster | None, located: Located, los: np.ndarray,
+                 crs: Any = None) -> None:
         m = output.model
         self.output, self.comm = output, m.comm
         self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
-        self.series = InsarSeries(raster, los) if m.comm.rank == 0 else None
+        georef = m.scene.georef
+        crs = crs if crs is not None else (georef.crs if georef is not None else None)
+        start = georef.start if georef is not None else None
+        self.series = InsarSeries(raster, los, crs, start) if m.comm.rank == 0 else None
         self.started = False
 
     def step_done(self, result: Any) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import run_on_root
+from ..errors import InputError, run_on_root
 from ..paths import beside_scene
 from .insar import InsarObserver, InsarSettings, read_insar_settings
 from .insar import check_continuation as insar_continue
@@ -24,12 +24,17 @@ from .stations import check_continuation as stations_continue
 class ObservationSettings:
     stations_file: str              # -pfault_stations ('' : none)
     insar: InsarSettings | None     # -pfault_insar_los, -pfault_insar_spacing (None: no raster)
+    gis: bool = True                # -pfault_gis: the GIS layers at the end of a run with -pfault_crs
 
 
 def read_observation_settings(reader: Any, scene_file: str = "") -> ObservationSettings:
     """The observation options; a relative station file is taken from the working directory, else beside the
     scene file (pfault.paths.beside_scene)."""
-    return ObservationSettings(beside_scene(reader.get("pfault_stations"), scene_file), read_insar_settings(reader))
+    spacing = reader.get("pfault_map_spacing")      # used by pfault.io.gis from options.txt
+    if spacing is not None and not spacing > 0:
+        raise InputError(f"-pfault_map_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
+    return ObservationSettings(beside_scene(reader.get("pfault_stations"), scene_file),
+                               read_insar_settings(reader, scene_file), reader.get("pfault_gis"))
 
 
 @dataclass(frozen=True)
@@ -57,14 +62,24 @@ class Observations:
             node = mpi.Split_type(MPI.COMM_TYPE_SHARED)     # the ranks of each node: rank 0 counts those of its own
             ranks_on_node = mpi.bcast(node.size if mpi.rank == 0 else None, root=0)
             node.Free()
-            pixels = share(locate_pixels, model.serial, model.settings.ground_surface, settings.insar.spacing,
-                           model.scene.mesh_origin, ranks_on_node)
+            if settings.insar.grid:
+                from .insar_grid import locate_product_pixels
+                georef = model.scene.georef
+                pixels = share(locate_product_pixels, model.serial, model.settings.ground_surface,
+                               settings.insar.grid, model.scene.mesh_origin, georef.crs if georef else None,
+                               settings.insar.los, ranks_on_node)
+            else:
+                pixels = share(locate_pixels, model.serial, model.settings.ground_surface, settings.insar.spacing,
+                               model.scene.mesh_origin, ranks_on_node)
         restart_dir = model.scene.restart_dir
         if restart_dir:         # the files of the run it continues are there, for the same points (before a solve)
             if stations is not None:
                 run_on_root(model.comm, stations_continue, stations[0], restart_dir)
             if pixels is not None:
-                run_on_root(model.comm, insar_continue, pixels[0], settings.insar.los, restart_dir)
+                grid = settings.insar.grid
+                run_on_root(model.comm, lambda: insar_continue(pixels[0][0] if grid else pixels[0],
+                                                               pixels[0][1] if grid else settings.insar.los,
+                                                               restart_dir))
         return cls(settings, stations, pixels)
 
     def observers(self, output: Any) -> list:
@@ -72,6 +87,10 @@ class Observations:
         out: list = []
         if self.stations is not None:
             out.append(StationObserver(output, *self.stations))
-        if self.pixels is not None:
+        if self.pixels is not None and self.settings.insar.grid:      # (raster, LOS, CRS) of the product's pixels
+            found, located = self.pixels
+            raster, los, crs = found if found is not None else (None, None, None)
+            out.append(InsarObserver(output, raster, located, los, crs))
+        elif self.pixels is not None:
             out.append(InsarObserver(output, *self.pixels, self.settings.insar.los))
         return out

@@ -56,6 +56,7 @@ class HeadsSettings:
     origin: tuple                   # site coordinates of the mesh's (0, 0, 0), m
     water_density: float
     gravity: float
+    crs: Any = None                 # the scene's CRS (-pfault_crs; pyproj), to which a file's own CRS is reprojected
 
 
 def _seconds_per(text: str, option: str) -> float:
@@ -79,7 +80,7 @@ def read_mesh_origin(reader: Any) -> tuple:
 
 
 def read_heads_settings(reader: Any, water_density: float, gravity: float, origin: tuple = (0.0, 0.0, 0.0),
-                        scene_file: str = "") -> HeadsSettings | None:
+                        scene_file: str = "", crs: Any = None) -> HeadsSettings | None:
     """The settings of -pfault_heads_file, or None when it is not given (its companions are then unused). The
     files are found from the working directory or, failing that, beside the scene file."""
     path = beside_scene(reader.get("pfault_heads_file"), scene_file)
@@ -97,12 +98,15 @@ def read_heads_settings(reader: Any, water_density: float, gravity: float, origi
     return HeadsSettings(file=path, grid=grid, time_unit=time_unit, time_unit_given=given, length_unit=length,
                          reference_time=reader.get("pfault_heads_reference_time"),
                          outside=reader.get("pfault_heads_outside"), origin=tuple(origin),
-                         water_density=water_density, gravity=gravity)
+                         water_density=water_density, gravity=gravity, crs=crs)
 
 
 def open_heads(settings: HeadsSettings) -> tuple[Any, Any]:
     """(the head file's reader, the MODFLOW grid or None); the reader's ``times`` in seconds as ``seconds``."""
     from ..io import head_files
+    from .netcdf_heads import is_mf6_netcdf, open_mf6_netcdf
+    if is_mf6_netcdf(settings.file):
+        return open_mf6_netcdf(settings)
     if settings.grid:
         grid = head_files.scaled(head_files.read_mf6_grid(settings.grid), settings.length_unit)
         heads = head_files.Mf6Heads(settings.file, grid, settings.grid)
@@ -269,7 +273,8 @@ def build_heads_source(comm: Any, settings: HeadsSettings, centroids: np.ndarray
         try:
             ref = reference_index(settings, heads.seconds)
             if grid is not None:
-                table, outside = _mf6_table(heads, grid, points, ref, rho_g, settings.length_unit)
+                table, outside = _mf6_table(heads, grid, points, ref, rho_g,
+                                            getattr(heads, "scale", settings.length_unit))
             else:
                 table, outside = _generic_table(heads, points, ref, rho_g)
             extent = (grid if grid is not None else heads).extent()

@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -62,6 +63,7 @@ class Problem:
     timeout: float | None = None
     log: object = print                  # one line per run
     runner: Callable[[Iterable[Run], int], list[RunResult]] = run_many   # makes the runs (workers side by side)
+    insar: Any = None                    # an InSAR time series as observations (pfault.tools.insar_fit.InsarTerm)
     evaluations: list[Evaluation] = field(default_factory=list)
     _cache: dict = field(default_factory=dict)
 
@@ -89,8 +91,9 @@ class Problem:
         """Runs the points not run yet, side by side; the evaluation of each point."""
         new = [x for x in dict.fromkeys(x.tobytes() for x in xs) if x not in self._cache]
         numbers = range(len(self.evaluations) + 1, len(self.evaluations) + 1 + len(new))
+        extra = self.insar.overrides() if self.insar is not None else {}
         runs = [Run(self.scene, os.path.join(self.run_dir, f"{n:04d}"),
-                    self.overrides(self.to_values(np.frombuffer(key))), self.ranks, False, self.timeout)
+                    {**self.overrides(self.to_values(np.frombuffer(key))), **extra}, self.ranks, False, self.timeout)
                 for n, key in zip(numbers, new)]
         for n, key, result in zip(numbers, new, self.runner(runs, self.workers)):
             ev = self._evaluation(n, purpose, self.to_values(np.frombuffer(key)), result)
@@ -116,7 +119,16 @@ class Problem:
         return sim
 
     def weighted_residual(self, output_dir: str) -> np.ndarray:
-        return (self.simulated(output_dir) - self.observations.value) / self.observations.sigma
+        """The stations' weighted residuals, then the InSAR product's (pfault.tools.insar_fit)."""
+        parts = [(self.simulated(output_dir) - self.observations.value) / self.observations.sigma
+                 if len(self.observations.value) else np.zeros(0)]
+        if self.insar is not None:
+            parts.append(self.insar.residual(output_dir))
+        return np.concatenate(parts)
+
+    def size(self) -> int:
+        """Measured values: the stations' components and the InSAR values used."""
+        return len(self.observations.value) + (self.insar.count() if self.insar is not None else 0)
 
     def _line(self, ev):
         values = " ".join(f"{p.name}={v:.6g}" for p, v in zip(self.parameters, ev.values))
@@ -131,7 +143,7 @@ class Problem:
             if purpose == "start":
                 raise ForwardRunFailed(f"the run at the start values failed: {ev.result.error} "
                                        f"(its log: {ev.result.log})")
-            return np.full(len(self.observations.value), np.inf)
+            return np.full(self.size(), np.inf)
         return ev.residual
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
@@ -171,12 +183,13 @@ class Fit:
     evaluation: Evaluation       # the run at the optimum
 
 
-def statistics(jac: np.ndarray, phi: float, values: np.ndarray, log: np.ndarray,
-               scale: np.ndarray) -> tuple[int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def statistics(jac: np.ndarray, phi: float, values: np.ndarray, log: np.ndarray, scale: np.ndarray,
+               nuisance: int = 0) -> tuple[int, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(dof, s^2, covariance of x, se of x, se of the values, correlation) of a weighted least-squares
-    optimum whose weighted-residual Jacobian in x is jac."""
+    optimum whose weighted-residual Jacobian in x is jac; ``nuisance``: parameters eliminated from the residuals
+    besides the fitted ones (an InSAR offset per date), which take their degrees of freedom."""
     m, n = jac.shape
-    dof = m - n
+    dof = m - n - nuisance
     variance = phi / dof if dof > 0 else np.nan
     cov = variance * np.linalg.pinv(jac.T @ jac)
     se_x = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -197,6 +210,7 @@ def fit(problem: Problem, max_iterations: int = 20) -> Fit:
     phi = float(best.phi)
     logs = np.array([p.log for p in problem.parameters])
     values = problem.to_values(res.x)
-    dof, variance, _, se_x, se_value, corr = statistics(res.jac, phi, values, logs, problem.scale())
+    nuisance = problem.insar.nuisance if problem.insar is not None else 0
+    dof, variance, _, se_x, se_value, corr = statistics(res.jac, phi, values, logs, problem.scale(), nuisance)
     return Fit(values, np.array(res.x), phi, problem.evaluations[0].phi, dof, variance, se_x, se_value, corr,
                res.active_mask != 0, int(res.njev), str(res.message), bool(res.status > 0), best)

@@ -224,10 +224,17 @@ class SceneFacts:
     station_file: str
     stations: list[str]
     time_end: float         # s
+    start_date: str = ""    # -pfault_start_date ('' : none)
 
 
-def scene_facts(scene: str) -> SceneFacts:
-    """The station file and end time of a scene, read from its options file as PETSc will read it."""
+def empty_observations() -> Observations:
+    """No station observations (an InSAR-only fit)."""
+    return Observations(np.array([], dtype=str), np.zeros(0), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
+
+
+def scene_facts(scene: str, need_stations: bool = True) -> SceneFacts:
+    """The station file, end time and start date of a scene, read from its options file as PETSc will read it;
+    ``need_stations``: a scene without -pfault_stations is an error."""
     if not os.path.isfile(scene):
         raise CalibrationInputError(f"scene file '{scene}' not found (give a pfault options file such as "
                                     "config/twin/twin.opts)")
@@ -236,11 +243,11 @@ def scene_facts(scene: str) -> SceneFacts:
     except ArgumentError as exc:
         raise CalibrationInputError(str(exc)) from None
     station_file = entries.get("pfault_stations") or ""
-    if not station_file:
+    if not station_file and need_stations:
         raise CalibrationInputError(f"scene {scene}: no -pfault_stations; add the stations the observations "
                                     "name (a CSV file name,x,y,z) to the scene")
     station_file = beside_scene(station_file, scene)          # as pfault finds it (pfault.paths)
-    stations = station_names(station_file, scene)
+    stations = station_names(station_file, scene) if station_file else []
     try:
         time_end = parse_quantity(entries.get("pfault_time_end") or str(spec_for("pfault_time_end").default),
                                   "pfault_time_end", "s")
@@ -248,7 +255,7 @@ def scene_facts(scene: str) -> SceneFacts:
         raise CalibrationInputError(f"scene {scene}: {exc}") from None
     if not math.isfinite(time_end):
         raise CalibrationInputError(f"scene {scene}: -pfault_time_end is not a finite time")
-    return SceneFacts(station_file, stations, time_end)
+    return SceneFacts(station_file, stations, time_end, entries.get("pfault_start_date") or "")
 
 
 def station_names(path: str, scene: str) -> list[str]:

@@ -38,7 +38,11 @@ def write_all(out: str, problem: Problem, result: Fit, scene: str, wall: float) 
     fitted = os.path.join(out, "fitted")
     shutil.move(result.evaluation.result.run.output_dir, fitted)
     _fitted_options(out, problem, result, scene)
-    _figure(out, problem, fitted)
+    if len(problem.observations.value):
+        _figure(out, problem, fitted)
+    if problem.insar is not None:
+        from .insar_report import write_insar_outputs
+        write_insar_outputs(out, problem.insar, fitted)
     _summary(out, problem, result, scene, wall)
 
 
@@ -142,7 +146,7 @@ def _figure(out, problem, fitted_dir):
 
 def _summary(out, problem, r, scene, wall):
     obs = problem.observations
-    w = r.evaluation.residual
+    w = r.evaluation.residual[:len(obs.value)]
     per_station = {name: float(np.sqrt(np.mean(w[obs.station == name] ** 2))) for name in obs.stations}
     summary = {
         "scene": scene, "converged": r.converged, "message": r.message, "iterations": r.iterations,
@@ -156,5 +160,8 @@ def _summary(out, problem, r, scene, wall):
         "rms_weighted_residual_per_station": per_station,
         "fitted_run": "fitted", "fitted_options": "fitted.opts",
     }
+    if problem.insar is not None:
+        wi = r.evaluation.residual[len(obs.value):]
+        summary["insar"] = {**problem.insar.summary(), "rms_weighted_residual": float(np.sqrt(np.mean(wi ** 2)))}
     with open(os.path.join(out, "calibration.json"), "w") as fh:
         json.dump(summary, fh, indent=1)

@@ -41,6 +41,7 @@ class Run:
     ranks: int = 1
     figures: bool = False
     timeout: float | None = None                                  # s; the run is killed past it
+    gis: bool = False                                             # -pfault_gis: the GIS layers of a scene with a CRS
 
 
 @dataclass(frozen=True)
@@ -65,9 +66,11 @@ def option_args(overrides: Mapping[str, str]) -> list[str]:
 
 
 def pfault_command(run: Run, python: str = sys.executable) -> list[str]:
-    """The command line of a run: figures off unless asked, the overrides after the scene's own options."""
+    """The command line of a run: figures and GIS layers off unless asked, the overrides after the scene's own
+    options."""
     args = [python, "-m", "pfault", run.scene, "-pfault_output_dir", run.output_dir,
-            "-pfault_figures", "true" if run.figures else "false", *option_args(run.overrides)]
+            "-pfault_figures", "true" if run.figures else "false", "-pfault_gis", "true" if run.gis else "false",
+            *option_args(run.overrides)]
     if run.ranks == 1:
         return args
     over = ["--oversubscribe"] if run.ranks > (os.cpu_count() or 1) else []

@@ -169,8 +169,7 @@ def test_fitted_options_name_the_scene_s_files_by_absolute_paths(tmp_path, monke
     monkeypatch.chdir(tmp_path)
     files = scene_files_absolute(os.path.join(site, "site.opts"))
     assert files == {"pfault_stations": os.path.join(site, "stations.csv"),
-                     "pfault_heads_file": os.path.join(site, "site.hds"),
-                     "pfault_heads_grid": os.path.join(site, "site.dis.grb"),
+                     "pfault_heads_file": os.path.join(site, "site.nc"),
                      "pfault_material_clay_young_modulus": "field:" + os.path.join(site, "site_clay_modulus.csv")}
     (tmp_path / "scenes").mkdir()
     scene = tmp_path / "scenes" / "scene.opts"
