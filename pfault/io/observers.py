@@ -176,7 +176,7 @@ class RunOutput:
         for term, load, h in zip(eq.terms, loads, state.histories):
             for series, values in term.fields(u_total, u_rel, load, h).items():
                 (faces if series == "fault" else cells).update(values)
-        return LocalStep(per_side(m, u_rel), m.source.vertex_head(), cells, faces or None)
+        return LocalStep(per_side(m, u_rel), m.source.vertex_head(), cells, faces)
 
     def write_step(self, result: Any, fields: Any = None) -> None:
         """Write the output step of a step's result (fields, faults, land surface) with the run's StepOutput, or

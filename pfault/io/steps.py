@@ -31,7 +31,8 @@ class LocalStep:
                                     # repeated where a vertex has fewer
     head: np.ndarray | None         # (nv,) head change (groundwater flow), or None
     cells: dict                     # per local cell: {name: (nc, ...)}
-    faults: dict | None             # per fault face this rank owns (``faces`` of StepOutput): {name: (nf, ...)}
+    faces: dict                     # per fault face this rank owns (``faces`` of StepOutput): {name: (nf, ...)}; the
+                                    # fault series' (fault.h5), written where the mesh has fault faces
 
 
 class StepOutput:
@@ -77,7 +78,7 @@ class StepOutput:
         on rank 0: None elsewhere or without a land surface)."""
         write = self._write_parallel if self.parallel else self._write_gathered
         values = LocalStep(values.displacement, values.head, agree_shapes(self.mpi, values.cells),
-                           None if values.faults is None else agree_shapes(self.mpi, values.faults))
+                           agree_shapes(self.mpi, values.faces) if self.n_faces else {})
         write(step, t, values, surface)
 
     def _write_parallel(self, step, t, values, surface):
@@ -89,10 +90,10 @@ class StepOutput:
         cells = {"material": self.mesh.cell_material}
         cells.update(values.cells)
         entries = {"fields": self.series["fields"].write_step(step, t, point, cells)}
-        if values.faults is not None:
-            faults = {"fault": self.fault_id}
-            faults.update(values.faults)
-            entries["fault"] = self.series["fault"].write_step(step, t, None, faults)
+        if self.n_faces:
+            faces = {"fault": self.fault_id}
+            faces.update(values.faces)
+            entries["fault"] = self.series["fault"].write_step(step, t, None, faces)
 
         def write():
             self.writer.add_steps(entries)
@@ -106,7 +107,7 @@ class StepOutput:
         names = list(values.cells)
         columns = [as_columns(values.cells[k]) for k in names]
         stacked = distributed.gather_cell_values(mesh, np.concatenate(columns, axis=1))
-        faults = None if values.faults is None else self.mpi.gather((self.faces, values.faults), root=0)
+        faces = self.mpi.gather((self.faces, values.faces), root=0) if self.n_faces else None
 
         def write():
             vertex, piece = self.copies
@@ -120,8 +121,8 @@ class StepOutput:
                 cell_data[k] = block[:, 0] if values.cells[k].ndim == 1 else block
                 start += c.shape[1]
             self.writer.write_step(step, t, point_data, cell_data)
-            if faults is not None:
-                self.writer.write_fault_step(step, t, _by_face(faults, self.n_faces))
+            if self.n_faces:
+                self.writer.write_fault_step(step, t, _by_face(faces, self.n_faces))
             self._surface_step(step, t, surface)
         run_on_root(self.comm, write)        # a failure to write ends every rank
 
