@@ -29,6 +29,7 @@ from .faults.bubbles import CellBubbles
 from .faults.faces import FaultFaces
 from .faults.history import face_pressure
 from .faults.term import FaultTerm, fault_topology
+from .margins import read_margin_settings
 from .mesh.fault import split_faults
 from .sources.heads import build_heads_source, check_heads_files, read_heads_settings, read_mesh_origin
 
@@ -51,6 +52,7 @@ class Scene:
     effects: Any
     heads_settings: Any = None      # a groundwater model's heads (pfault.sources.heads.HeadsSettings), or None
     mesh_origin: tuple = (0.0, 0.0, 0.0)    # site coordinates = mesh coordinates + mesh_origin (m)
+    margins: Any = None             # what margins to failure report (pfault.solver.terms.MarginSettings), or None
 
 
 @dataclass(frozen=True)
@@ -146,12 +148,13 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     fault_names = [f.name for f in fault_settings]
     boundaries = scn.read_boundaries(reader, surface_names, exclude=fault_names)
     contact = scn.read_contact_options(reader) if fault_names else None
+    margins = read_margin_settings(reader, s, mesh_origin)
     reader.check_pfault_options()
     effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries,
                              heads=heads_settings.file if heads_settings is not None else "")
     scene = Scene(s, restart_dir, figures, solver_name, material_names, surface_names,
                   materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects,
-                  heads_settings, mesh_origin)
+                  heads_settings, mesh_origin, margins)
     return scene, serial
 
 

@@ -19,6 +19,7 @@ from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLi
 from .model import Model, build_model
 from .options import OptionReader, check_unused_petsc_options
 from .io import checkpoint
+from .margins import Margins
 from .solver.policy import StepSolver
 from .state import State
 from .surface import LandSurface
@@ -55,7 +56,8 @@ class Simulation:
         self.solver: StepSolver = solver
         restart_step = None if self.resumed is None else self.resumed[1] + self.resumed[2]
         self.surface = LandSurface(self.model)
-        self.stepper = loop.Stepper(self.model, state, solver, self.surface)
+        self.stepper = loop.Stepper(self.model, state, solver, self.surface,
+                                    Margins(self.model, solver, self.model.scene.margins))
         self.output = RunOutput(self.model, state, self.argv, self.surface, self.model.scene.restart_dir,
                                 restart_step)
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
@@ -96,7 +98,7 @@ class Simulation:
 
     def _initial_state(self) -> list[dict]:
         """The geostatic initial equilibrium (step 0), when the scene asks for one, and the output step of the
-        initial state; returns the initial step records' JSON."""
+        initial state with its margins to failure; returns the initial step records' JSON."""
         records = []
         if self.settings.geostatic:
             stage = PETSc.Log.Stage("Solve")
@@ -106,7 +108,10 @@ class Simulation:
             self.wall["solve"] += rec.solve.cost.wall_s
             records.append(rec.as_json())
             PETSc.Sys.Print(progress_line(0, records[-1]))
-        self.output.capture_initial()
+            margins = rec.margins
+        else:
+            margins = self.stepper.initial_margins()
+        self.output.capture_initial(margins)
         return records
 
     def observers(self, output: RunOutput, records: list) -> list[Observer]:

@@ -8,6 +8,10 @@ equations and the output read it with ``cell_dp(t)``, which changes nothing. Eve
 - ``cell_dp(t)``: the pore-pressure change per local cell (Pa) at a time t between the time the source was
   last advanced from and the time it was advanced to (a step cut into sub-steps reads it within the step:
   a flow model's field is interpolated linearly in time there);
+- ``loaded_cells(t)``: the local cells whose pore pressure the source changes (a bool per cell), which a
+  uniform further drawdown lowers (pfault.margins): a table's materials with a table that is not zero, every
+  cell of a flow model (it solves for all of them), the cells of a groundwater model's heads that are inside it
+  and change at some saved time;
 - ``step_record()``: figures of the last advance for the step's record (empty for a table);
 - ``has_state``; ``state()`` / ``restore(state)``: its state (a flow model's ``FlowState``; a table has none: None),
   which the run's state records after every advance and a restart gives back;
@@ -51,6 +55,12 @@ class TableSource:
 
     def cell_dp(self, t: float) -> np.ndarray:
         return self.drawdown.cell_values(t, self.cell_material)
+
+    def loaded_cells(self, t: float) -> np.ndarray:
+        """The cells of the materials with a table that is not zero throughout."""
+        loaded = np.array([tab is not None and any(v != 0 for v in tab.values) for tab in self.drawdown.tables],
+                          dtype=bool)
+        return loaded[self.cell_material] if len(loaded) else np.zeros(len(self.cell_material), dtype=bool)
 
     def step_record(self) -> dict:
         return {}
@@ -106,6 +116,10 @@ class FlowSource:
         if after(t, now) or after(now, t):
             raise ValueError(f"groundwater flow is at t = {now:g} s; its pore pressure at {t:g} s is not known")
         return self._current()
+
+    def loaded_cells(self, t: float) -> np.ndarray:
+        """Every cell: the flow model solves for the head of all of them."""
+        return np.ones(len(self._current()), dtype=bool)
 
     def step_record(self) -> dict:
         """The flow's Krylov iterations in its last step and the largest drawdown (m) now (collective)."""

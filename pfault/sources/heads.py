@@ -147,6 +147,7 @@ class HeadsSource:
     def __init__(self, seconds: np.ndarray, table: np.ndarray) -> None:
         self.seconds = np.asarray(seconds, float)
         self.table = table
+        self._changed = np.any(table != 0, axis=0)          # per cell: changes at some saved time
 
     @property
     def active(self) -> bool:
@@ -164,6 +165,11 @@ class HeadsSource:
         i = int(np.searchsorted(s, t, side="right")) - 1
         theta = (t - s[i]) / (s[i + 1] - s[i])
         return (1.0 - theta) * self.table[i] + theta * self.table[i + 1]
+
+    def loaded_cells(self, t: float) -> np.ndarray:
+        """The cells whose pore pressure changes at some saved time (cells outside the groundwater model, with
+        -pfault_heads_outside zero, never do)."""
+        return self._changed.copy()
 
     def step_record(self) -> dict:
         return {}
