@@ -124,6 +124,7 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
         from .solver.setup import find_solver_file
         find_solver_file(solver_name, options_file)         # a file that is not there: an error before meshing
     mesh_origin = read_mesh_origin(reader)
+    margins = read_margin_settings(reader, s, mesh_origin)
     heads_settings = read_heads_settings(reader, s.water_density, s.gravity, mesh_origin, options_file)
     if heads_settings is not None:
         run_on_root(comm, check_heads_files, heads_settings, s.time_end)     # before meshing: fail fast
@@ -148,7 +149,6 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     fault_names = [f.name for f in fault_settings]
     boundaries = scn.read_boundaries(reader, surface_names, exclude=fault_names)
     contact = scn.read_contact_options(reader) if fault_names else None
-    margins = read_margin_settings(reader, s, mesh_origin)
     reader.check_pfault_options()
     effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries,
                              heads=heads_settings.file if heads_settings is not None else "")

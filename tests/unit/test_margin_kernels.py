@@ -123,3 +123,25 @@ def test_a_face_already_outside_has_no_margin():
     lam, mode = fm.crossing(t0, np.zeros((2, 3)), s)
     assert list(lam) == [0.0, 0.0]
     assert list(mode) == [fm.SLIP, fm.OPEN]
+
+
+def test_the_cells_each_source_draws_down():
+    """A uniform further drawdown lowers the cells whose pore pressure the source changes: a table's materials with
+    a table that is not zero throughout, every cell of the flow model, the cells of a groundwater model's heads that
+    change at some saved time."""
+    from pfault.physics.loading import MaterialDrawdown, Table
+    from pfault.sources import FlowSource, TableSource
+    from pfault.sources.heads import HeadsSource
+
+    tables = MaterialDrawdown([Table((0.0, 1.0), (0.0, -9.8e4)), None, Table((0.0, 1.0), (0.0, 0.0))])
+    cells = np.array([0, 1, 2, 0, 2, 1])
+    assert list(TableSource(tables, cells).loaded_cells(0.5)) == [True, False, False, True, False, False]
+    heads = HeadsSource(np.array([0.0, 10.0]), np.array([[0.0, 0.0, 0.0], [-5.0, 0.0, 3.0]]))
+    assert list(heads.loaded_cells(5.0)) == [True, False, True]
+
+    class Flow:
+        active, time = True, 0.0
+
+        def cell_dp(self):
+            return np.zeros(4)
+    assert FlowSource(Flow()).loaded_cells(0.0).tolist() == [True] * 4
