@@ -104,6 +104,11 @@ class StepRecord:
     def time_s(self) -> float:
         return self.solve.time_s
 
+    @property
+    def margins_wall_s(self) -> float:
+        """The wall time of the margins' linear solve (0 without margins)."""
+        return 0.0 if self.margins is None else float(self.margins.cost.wall_s)
+
     def as_json(self) -> dict:
         """summary.json's record of the step (docs/outputs.md)."""
         if self.initial:

@@ -172,6 +172,7 @@ def time_loop(stepper: Stepper, observers: list, times: np.ndarray, first: int, 
             stop = request.agreed()
             due = index % every == 0 or index == len(times) - 1 or not solve.converged or stop is not None
             record, u_rel, surface = stepper.measure(step, solve, source, due)
+            wall["margins"] = wall.get("margins", 0.0) + record.margins_wall_s
             records.append(record.as_json())
             result = StepResult(step, t, record, u_rel, output=due, stop=stop, surface=surface)
             t0 = time.perf_counter()

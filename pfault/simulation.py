@@ -38,7 +38,7 @@ class Simulation:
         self.costs = EffectCosts(self.comm)
         observed = read_observation_settings(self.reader, options_file)    # before build_model checks the options
         self.model: Model = build_model(self.comm, self.reader, options_file)
-        self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "output": 0.0, **self.model.wall}
+        self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "margins": 0.0, "output": 0.0, **self.model.wall}
         self.times = np.linspace(0.0, self.settings.time_end, self.settings.time_steps + 1)
         state = solver = None
         try:
@@ -106,6 +106,7 @@ class Simulation:
             rec = self.stepper.initial()
             stage.pop()
             self.wall["solve"] += rec.solve.cost.wall_s
+            self.wall["margins"] += rec.margins_wall_s
             records.append(rec.as_json())
             PETSc.Sys.Print(progress_line(0, records[-1]))
             margins = rec.margins
