@@ -39,16 +39,19 @@ def read_margin_settings(reader: Any, settings: Any, origin: tuple) -> MarginSet
 @dataclass(frozen=True)
 class MarginStep:
     """The margins at an output time: each term's (``terms``: one per term, None for a term without), whether the
-    linear solve converged (else the margins of parts that have not failed are NaN) and its cost."""
+    linear solve converged (else the margins of parts that have not failed are NaN), its cost and whether it was
+    solved (``solved``: not when every part has failed, whose margins are zero whatever the response)."""
     terms: tuple
     converged: bool
     cost: SolveCost
+    solved: bool = True
 
     def as_json(self) -> dict:
         """The step record's part: ``margin_solve`` and each term's (a fault's ``faults``/NAME/``margin``)."""
         c = self.cost
-        out: dict = {"margin_solve": {"converged": bool(self.converged), "ksp_its": int(c.ksp_its),
-                                      "factorizations": int(c.factorizations), "wall_s": float(c.wall_s)}}
+        out: dict = {"margin_solve": {"solved": bool(self.solved), "converged": bool(self.converged),
+                                      "ksp_its": int(c.ksp_its), "factorizations": int(c.factorizations),
+                                      "wall_s": float(c.wall_s)}}
         for part in self.terms:
             if part is not None:
                 merge_json(out, part.as_json())
@@ -79,8 +82,11 @@ class Margins:
         loaded = source.loaded_cells(t) if source.active else np.zeros(len(self.model.mesh.cells), dtype=bool)
         if not self.model.comm.tompi4py().allreduce(bool(np.any(loaded)), op=MPI.LOR):
             return None
-        response = drawdown_response(eq, self.solver, state, t, -self.settings.rho_g * loaded.astype(float))
         x_loc = eq.local_array(state.u)
+        live = sum(term.margin_parts(x_loc, load, h) for term, load, h in zip(eq.terms, eq.loads.term_loads,
+                                                                              state.histories))
+        response = drawdown_response(eq, self.solver, state, t, -self.settings.rho_g * loaded.astype(float),
+                                     solve=live > 0)
         parts = tuple(term.margins(x_loc, response.dx, load, rate, h, self.model.mesh, self.settings)
                       for term, load, rate, h in zip(eq.terms, eq.loads.term_loads, response.rates, state.histories))
-        return MarginStep(parts, response.converged, response.cost)
+        return MarginStep(parts, response.converged, response.cost, live > 0)

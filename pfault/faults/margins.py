@@ -182,6 +182,14 @@ def residual_rate(term: Any, x_loc: np.ndarray, load: Any, rate: FaultLoadRate, 
     out += np.bincount(term.faces.lm_dofs.ravel(), weights=r.ravel(), minlength=len(out))
 
 
+def live_faces(term: Any, x_loc: np.ndarray, load: Any, history: Any) -> int:
+    """How many faces, on all ranks, have a margin that the linear response decides: stuck now and not broken on a
+    candidate surface (collective)."""
+    states = term.configuration(x_loc, load, history, exact=False)
+    live = (states == ct.STICK) & ~(history.broken & term.laws.strength.candidate)
+    return int(term.faces.mpi.allreduce(int(np.count_nonzero(live)), op=MPI.SUM))
+
+
 def face_margins(term: Any, x_loc: np.ndarray, dx_loc: np.ndarray, load: Any, rate: FaultLoadRate,
                  history: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(margin (m of further drawdown), margin_mode) of every owned face at the converged state x_loc with the

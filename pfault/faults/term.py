@@ -293,6 +293,10 @@ class FaultTerm:
                       out: np.ndarray) -> None:
         fm.residual_rate(self, x_loc, load, rate, history, out)
 
+    def margin_parts(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory) -> int:
+        """Faces whose margin needs the response (stuck, not broken), on all ranks. Collective."""
+        return fm.live_faces(self, x_loc, load, history)
+
     def margins(self, x_loc: np.ndarray, dx_loc: np.ndarray, load: FaultLoad, rate: fm.FaultLoadRate,
                 history: FaultHistory, mesh: Any, settings: Any) -> fm.FaultMargins:
         """Every owned face's margin to failure at x_loc, with the state's rate dx_loc, and each fault's figures

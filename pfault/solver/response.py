@@ -48,14 +48,16 @@ def drawdown_rhs(eq: Any, x_loc: np.ndarray, histories: tuple, t: float, cell_ra
     return rhs, rates
 
 
-def drawdown_response(eq: Any, solver: Any, state: Any, t: float, cell_rate: np.ndarray) -> Response:
+def drawdown_response(eq: Any, solver: Any, state: Any, t: float, cell_rate: np.ndarray, solve: bool = True
+                      ) -> Response:
     """The response of the converged state (``state``, at time t) to the pore-pressure rate ``cell_rate``: one
-    linear solve with the step solver (pfault.solver.policy.StepSolver.solve_response). Collective."""
+    linear solve with the step solver (pfault.solver.policy.StepSolver.solve_response); ``solve`` False: the load
+    rates only, the state's rate zero (no part's margin depends on it). Collective."""
     rhs, rates = drawdown_rhs(eq, eq.local_array(state.u), state.histories, t, cell_rate)
     du = rhs.duplicate()
     try:
-        converged, cost = solver.solve_response(rhs, du)
-        dx = eq.local_array(du) if converged else np.full(eq.dofmap.n_local, np.nan)
+        converged, cost = solver.solve_response(rhs, du) if solve else (True, SolveCost())
+        dx = eq.local_array(du) if converged and solve else np.full(eq.dofmap.n_local, 0.0 if converged else np.nan)
     finally:
         du.destroy()
         rhs.destroy()

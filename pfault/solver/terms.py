@@ -38,6 +38,8 @@ The protocol (methods a term has; collective where it says so):
   linear response of a converged state): ``load_rate(t, cell_dp, cell_rate, alpha, out)`` the rate of its load
   per metre of drawdown (``cell_rate``: Pa/m per local cell), adding the rate of its share of f to ``out``;
   ``residual_rate(x_loc, load, rate, history, out)`` adds d(its residual)/d(drawdown) at the fixed state x_loc;
+  ``margin_parts(x_loc, load, history)`` how many of its parts, on all ranks, have a margin the response decides
+  (a fault's faces stuck and not broken; none: the response is not solved); collective;
   ``margins(x_loc, dx_loc, load, rate, history, mesh, settings)`` its margins at x_loc with the state's rate dx_loc
   (None: it has none), an object with ``fields()`` (as ``fields``) and ``as_json()`` (merged into the step's
   record); collective.
@@ -116,6 +118,8 @@ class Term(Protocol):
                   out: np.ndarray) -> Any: ...
 
     def residual_rate(self, x_loc: np.ndarray, load: Any, rate: Any, history: Any, out: np.ndarray) -> None: ...
+
+    def margin_parts(self, x_loc: np.ndarray, load: Any, history: Any) -> int: ...
 
     def margins(self, x_loc: np.ndarray, dx_loc: np.ndarray, load: Any, rate: Any, history: Any, mesh: Any,
                 settings: MarginSettings) -> Any: ...
