@@ -88,7 +88,6 @@ class Stepper:
         t0 = time.perf_counter()
         with logged("pfaultGeostatic"):
             GeostaticStart(self.eq, self.model.settings).compute(self.state, self.solver.solve_linear)
-        margins = self.initial_margins()
         loc = self.eq.local_array(self.state.u)
         counts = {}
         if self.eq.terms:
@@ -97,7 +96,7 @@ class Stepper:
             counts = {"stick": int(c[0]), "slip": int(c[1]), "open": int(c[2])}
         terms = self.terms_measures(loc, np.zeros_like(loc), at_rest=True)    # its own jumps: zero
         solve = Solve(0.0, True, 0, SolveCost(wall_s=time.perf_counter() - t0), counts=counts)
-        return StepRecord(0, solve, terms=terms, initial=True, margins=margins)
+        return StepRecord(0, solve, terms=terms, initial=True, margins=self.initial_margins())
 
     def initial_margins(self) -> Any:
         """The margins to failure of the initial state (pfault.margins.MarginStep or None; collective)."""
