@@ -135,7 +135,8 @@ def _panel(fig: Any, ax: Any, snap: MarginSnapshot, mine: np.ndarray, name: str,
     live = np.isfinite(margin) & (margin > 0)
     areas = ", ".join(f"{b:g} m: {area[margin <= b].sum():,.0f}" for b in bands)
     failed = band == 0
-    text = f"failed now {int(np.count_nonzero(failed))} faces, {area[failed].sum():,.0f} m^2; area within {areas} m^2"
+    n = int(np.count_nonzero(failed))
+    text = f"failed now {n} face{'s' * (n != 1)}, {area[failed].sum():,.0f} m^2; area within {areas} m^2"
     if live.any():
         j = np.flatnonzero(live)[np.argmin(margin[live])]
         c = faces[j]
@@ -143,6 +144,8 @@ def _panel(fig: Any, ax: Any, snap: MarginSnapshot, mine: np.ndarray, name: str,
         mname = MODES[mode[j]] if 0 <= mode[j] < len(MODES) else "?"
         where = ", ".join(f"{x:.6g}" for x in centroids[j])
         title = f"{name}: smallest margin {margin[j]:.4g} m ({mname}, starred) at ({where}) m of the mesh"
+    elif failed.all():
+        title = f"{name}: every face has failed (slipping, open or broken)"
     else:
         title = f"{name}: no stuck face fails under further drawdown"
     ax.set_title(f"{title}\n{text}", fontsize=9.5)
