@@ -29,6 +29,7 @@ from .faults.bubbles import CellBubbles
 from .faults.faces import FaultFaces
 from .faults.history import face_pressure
 from .faults.term import FaultTerm, fault_topology
+from .margins import read_margin_settings
 from .mesh.fault import split_faults
 from .georef import read_georef
 from .sources.heads import build_heads_source, check_heads_files, read_heads_settings, read_mesh_origin
@@ -55,6 +56,7 @@ class Scene:
     warnings: tuple = ()            # the warning lines printed about the scene's input (summary.json keeps them)
     unchanged_materials: tuple = ()         # materials whose pore pressure does not change
     georef: Any = None              # -pfault_crs, -pfault_start_date (pfault.georef.Georef)
+    margins: Any = None             # what margins to failure report (pfault.solver.terms.MarginSettings), or None
 
 
 @dataclass(frozen=True)
@@ -130,6 +132,7 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
         find_solver_file(solver_name, options_file)         # a file that is not there: an error before meshing
     mesh_origin = read_mesh_origin(reader)
     georef = read_georef(reader, options_file)
+    margins = read_margin_settings(reader, s, mesh_origin)
     heads_settings = read_heads_settings(reader, s.water_density, s.gravity, mesh_origin, options_file, georef.crs)
     if heads_settings is not None:
         run_on_root(comm, check_heads_files, heads_settings, s.time_end)     # before meshing: fail fast
@@ -162,7 +165,8 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
                              heads=heads_settings.file if heads_settings is not None else "", unchanged=unchanged)
     scene = Scene(s, restart_dir, figures, solver_name, material_names, surface_names,
                   materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects,
-                  heads_settings, mesh_origin, warnings=warnings, unchanged_materials=unchanged, georef=georef)
+                  heads_settings, mesh_origin, warnings=warnings, unchanged_materials=unchanged, georef=georef,
+                  margins=margins)
     return scene, serial
 
 

@@ -246,6 +246,11 @@ SPECS = [
        "summary.json's fissure-prone length and area"),
     _s("pfault_figures", "bool", True, "", "write PNG figures next to the output at the end of the run: fault "
        "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map"),
+    _s("pfault_margins", "bool", True, "", "margins to failure at every output time: the further uniform drawdown "
+       "(m of head) of the loaded materials at which each fault face would slip, open or break, from the linear "
+       "response of the converged state (fault.h5 margin_*, summary.json faults/NAME/margin, fault_margins.png)"),
+    _s("pfault_margin_thresholds", "list", "1,5,10", "m", "drawdowns (m of head) for which summary.json gives each "
+       "fault's area whose margin is within them"),
 ]
 
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")

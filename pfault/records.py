@@ -83,8 +83,9 @@ class StepRecord:
     """A completed step: its number, its solve, and what was measured after it: the land surface's largest
     subsidence and horizontal displacement (m), the land surface's hazard maxima (``hazard``: on output steps,
     pfault.io.hazard), each term's measures (``terms``: one per term, each with ``as_json``: a fault term's is
-    pfault.faults.measures.FaultMeasures), and the pore-pressure source's figures (``source``). ``initial``: the
-    geostatic initial state (step 0)."""
+    pfault.faults.measures.FaultMeasures), the pore-pressure source's figures (``source``) and, on output steps,
+    the margins to failure (``margins``: pfault.margins.MarginStep, or None). ``initial``: the geostatic initial
+    state (step 0)."""
     step: int
     solve: Solve
     max_subsidence_m: float | None = None
@@ -93,6 +94,7 @@ class StepRecord:
     terms: tuple = ()
     source: dict = field(default_factory=dict)
     initial: bool = False
+    margins: Any = None
 
     @property
     def converged(self) -> bool:
@@ -101,6 +103,11 @@ class StepRecord:
     @property
     def time_s(self) -> float:
         return self.solve.time_s
+
+    @property
+    def margins_wall_s(self) -> float:
+        """The wall time of the margins' linear solve (0 without margins)."""
+        return 0.0 if self.margins is None else float(self.margins.cost.wall_s)
 
     def as_json(self) -> dict:
         """summary.json's record of the step (docs/outputs.md)."""
@@ -116,5 +123,18 @@ class StepRecord:
             rec["max_horizontal_displacement_m"] = float(self.max_horizontal_displacement_m or 0.0)
         for measures in self.terms:
             rec.update(measures.as_json())
+        if self.margins is not None:
+            merge_json(rec, self.margins.as_json())
         rec.update(self.hazard)
         return rec
+
+
+def merge_json(into: dict, other: dict) -> dict:
+    """``other`` merged into ``into``, nested dicts key by key (a fault's margin beside its figures), other values
+    replaced; returns ``into``."""
+    for key, value in other.items():
+        if isinstance(value, dict) and isinstance(into.get(key), dict):
+            merge_json(into[key], value)
+        else:
+            into[key] = value
+    return into

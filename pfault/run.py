@@ -26,7 +26,7 @@ from .surface import LandSurface, SurfaceStep
 @dataclass(frozen=True)
 class StepResult:
     """A completed step: its number and time, its record, the displacement relative to the initial state (local
-    array), whether its fields are written (``output``), the stop signal agreed after it (or None), and the land
+    array), whether its fields are written (``output``), the stop signal agreed after it (or None), the land
     surface's step (rank 0, output steps with a land surface; None otherwise)."""
     step: int
     t: float
@@ -71,10 +71,11 @@ def per_side(model: Any, u_rel: np.ndarray) -> np.ndarray:
 
 class Stepper:
     """Solves and measures the steps of ``model`` from ``state`` with ``solver`` (pfault.solver.policy.StepSolver);
-    ``surface``: the land surface measured at output steps."""
+    ``surface``: the land surface and ``margins`` the margins to failure (pfault.margins.Margins), measured at
+    output steps."""
 
-    def __init__(self, model: Any, state: Any, solver: Any, surface: LandSurface) -> None:
-        self.model, self.state, self.solver, self.surface = model, state, solver, surface
+    def __init__(self, model: Any, state: Any, solver: Any, surface: LandSurface, margins: Any) -> None:
+        self.model, self.state, self.solver, self.surface, self.margins = model, state, solver, surface, margins
         self.eq = model.equations
 
     def terms_measures(self, x_loc: np.ndarray, x_rel: np.ndarray, at_rest: bool = False) -> tuple:
@@ -83,7 +84,7 @@ class Stepper:
                      for term, load, h in zip(self.eq.terms, self.eq.loads.term_loads, self.state.histories))
 
     def initial(self) -> StepRecord:
-        """The geostatic initial equilibrium (step 0): its record."""
+        """The geostatic initial equilibrium (step 0): its record (with the margins of the initial state)."""
         t0 = time.perf_counter()
         with logged("pfaultGeostatic"):
             GeostaticStart(self.eq, self.model.settings).compute(self.state, self.solver.solve_linear)
@@ -95,7 +96,11 @@ class Stepper:
             counts = {"stick": int(c[0]), "slip": int(c[1]), "open": int(c[2])}
         terms = self.terms_measures(loc, np.zeros_like(loc), at_rest=True)    # its own jumps: zero
         solve = Solve(0.0, True, 0, SolveCost(wall_s=time.perf_counter() - t0), counts=counts)
-        return StepRecord(0, solve, terms=terms, initial=True)
+        return StepRecord(0, solve, terms=terms, initial=True, margins=self.initial_margins())
+
+    def initial_margins(self) -> Any:
+        """The margins to failure of the initial state (pfault.margins.MarginStep or None; collective)."""
+        return self.margins.measure(self.state, self.state.time)
 
     def settle(self, t: float, solve: Solve) -> Solve:
         """After a converged solve at t: the terms settle (a fault's faces whose traction exceeds their strength
@@ -129,14 +134,16 @@ class Stepper:
 
     def measure(self, step: int, solve: Solve, source: dict, due: bool
                 ) -> tuple[StepRecord, np.ndarray, SurfaceStep | None]:
-        """The record of the solved step (``source``: the pore-pressure source's figures), the displacement
-        relative to the initial state and, on an output step (``due``), the land surface's step."""
+        """The record of the solved step (``source``: the pore-pressure source's figures; on an output step
+        (``due``) of a converged one the margins to failure), the displacement relative to the initial state and,
+        on an output step, the land surface's step."""
         model = self.model
         u_rel = relative_displacement(model, self.state)
         sub, hor = surface_figures(model, u_rel)
         terms = self.terms_measures(self.eq.local_array(self.state.u), u_rel)
         hazard, surface = self.surface.measure(per_side(model, u_rel)) if due else ({}, None)
-        return StepRecord(step, solve, sub, hor, hazard or {}, terms, source), u_rel, surface
+        margins = self.margins.measure(self.state, solve.time_s) if due and solve.converged else None
+        return StepRecord(step, solve, sub, hor, hazard or {}, terms, source, margins=margins), u_rel, surface
 
 
 def time_loop(stepper: Stepper, observers: list, times: np.ndarray, first: int, offset: int, records: list,
@@ -164,6 +171,7 @@ def time_loop(stepper: Stepper, observers: list, times: np.ndarray, first: int, 
             stop = request.agreed()
             due = index % every == 0 or index == len(times) - 1 or not solve.converged or stop is not None
             record, u_rel, surface = stepper.measure(step, solve, source, due)
+            wall["margins"] = wall.get("margins", 0.0) + record.margins_wall_s
             records.append(record.as_json())
             result = StepResult(step, t, record, u_rel, output=due, stop=stop, surface=surface)
             t0 = time.perf_counter()

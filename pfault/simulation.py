@@ -20,6 +20,7 @@ from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLi
 from .model import Model, build_model
 from .options import OptionReader, check_unused_petsc_options
 from .io import checkpoint
+from .margins import Margins
 from .solver.policy import StepSolver
 from .sources import coverage
 from .state import State
@@ -41,7 +42,7 @@ class Simulation:
         observed = read_observation_settings(self.reader, options_file)
         changed_inputs = provenance.read_changed_inputs(self.reader)
         self.model: Model = build_model(self.comm, self.reader, options_file)
-        self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "output": 0.0, **self.model.wall}
+        self.wall = {"mesh": 0.0, "setup": 0.0, "solve": 0.0, "margins": 0.0, "output": 0.0, **self.model.wall}
         self.times = np.linspace(0.0, self.settings.time_end, self.settings.time_steps + 1)
         state = solver = None
         try:
@@ -65,7 +66,8 @@ class Simulation:
         self.solver: StepSolver = solver
         restart_step = None if self.resumed is None else self.resumed[1] + self.resumed[2]
         self.surface = LandSurface(self.model)
-        self.stepper = loop.Stepper(self.model, state, solver, self.surface)
+        self.stepper = loop.Stepper(self.model, state, solver, self.surface,
+                                    Margins(self.model, solver, self.model.scene.margins))
         self.output = RunOutput(self.model, state, self.argv, self.surface, self.model.scene.restart_dir,
                                 restart_step, metadata={provenance.DATASET: self.inputs})
         self.composer = RunSummary(self.model, state, solver, self.costs, restart_step)
@@ -111,7 +113,7 @@ class Simulation:
 
     def _initial_state(self) -> list[dict]:
         """The geostatic initial equilibrium (step 0), when the scene asks for one, and the output step of the
-        initial state; returns the initial step records' JSON."""
+        initial state with its margins to failure; returns the initial step records' JSON."""
         records = []
         if self.settings.geostatic:
             stage = PETSc.Log.Stage("Solve")
@@ -119,9 +121,13 @@ class Simulation:
             rec = self.stepper.initial()
             stage.pop()
             self.wall["solve"] += rec.solve.cost.wall_s
+            self.wall["margins"] += rec.margins_wall_s
             records.append(rec.as_json())
             PETSc.Sys.Print(progress_line(0, records[-1]))
-        self.output.capture_initial()
+            margins = rec.margins
+        else:
+            margins = self.stepper.initial_margins()
+        self.output.capture_initial(margins)
         return records
 
     def observers(self, output: RunOutput, records: list) -> list[Observer]:

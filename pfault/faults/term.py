@@ -25,6 +25,7 @@ from ..effects import logged
 from . import blocks
 from . import breaking as br
 from . import contact as ct
+from . import margins as fm
 from .bubbles import CellBubbles
 from .faces import FaultFaces
 from .history import FacePressure, FaultHistory, FaultLoad, StepStart
@@ -283,6 +284,30 @@ class FaultTerm:
     def fields(self, x_total: np.ndarray, x_rel: np.ndarray, load: FaultLoad, history: FaultHistory) -> dict:
         """The output series' fields: fault.h5's of the owned faces (pfault.faults.measures.face_fields)."""
         return {"fault": face_fields(self, x_total, x_rel, load, history, history.slid)}
+
+    # -- margins to failure (pfault.faults.margins) ----------------------------------------------------
+    def load_rate(self, t: float, cell_dp: np.ndarray | None, cell_rate: np.ndarray, alpha: np.ndarray,
+                  out: np.ndarray) -> fm.FaultLoadRate:
+        """The rate of ``load`` per metre of further drawdown (``cell_rate``: Pa/m per local cell)."""
+        return fm.load_rate(self, t, cell_dp, cell_rate, alpha, out)
+
+    def residual_rate(self, x_loc: np.ndarray, load: FaultLoad, rate: fm.FaultLoadRate, history: FaultHistory,
+                      out: np.ndarray) -> None:
+        fm.residual_rate(self, x_loc, load, rate, history, out)
+
+    def margin_parts(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory) -> int:
+        """Faces whose margin needs the response (stuck, not broken), on all ranks. Collective."""
+        return fm.live_faces(self, x_loc, load, history)
+
+    def margins(self, x_loc: np.ndarray, dx_loc: np.ndarray, load: FaultLoad, rate: fm.FaultLoadRate,
+                history: FaultHistory, mesh: Any, settings: Any) -> fm.FaultMargins:
+        """Every owned face's margin to failure at x_loc, with the state's rate dx_loc, and each fault's figures
+        (``settings``: pfault.solver.terms.MarginSettings). Collective."""
+        lam, mode, failed = fm.face_margins(self, x_loc, dx_loc, load, rate, history)
+        centroids = mesh.coords[self.faces.verts].mean(axis=1) + np.asarray(settings.origin)
+        names = [f.name for f in self.settings]
+        return fm.FaultMargins(lam, mode, settings.rho_g, fm.fault_figures(
+            self.faces, names, lam, mode, failed, centroids, settings.thresholds, settings.rho_g))
 
     # -- the checkpoint ------------------------------------------------------------------------------
     def history_arrays(self, history: FaultHistory) -> dict:

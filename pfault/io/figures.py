@@ -22,6 +22,9 @@ writes them into any RUN_DIR (an interrupted run's too):
   of the fissures that formed and reached the land surface (pfault.io.fissures);
 - ``fissure_break.png`` (faults with a tensile strength that broke, pfault.io.fissures): each fault's broken
   faces coloured by the year they broke, intact faces grey, with the fissure's depth, length and first break;
+- ``fault_margins.png`` (faults with margins to failure, pfault.io.margin_map): each fault's faces banded by their
+  margin (m of further drawdown: failed now, within each of the run's thresholds, beyond, never), the smallest
+  starred;
 - ``insar_los.png`` (``-pfault_insar_los``): the LOS raster's displacement and velocity at its last time
   (pfault.io.insar).
 
@@ -649,6 +652,10 @@ def make_figures(run_dir: str, step: int = -1) -> list[str]:
         broken = fissure_figure(run_dir, step=step)     # faults with a tensile strength that broke
         if broken is not None:
             paths.append(broken)
+        from .margin_map import margin_figure
+        margins = margin_figure(run_dir, step=step)     # the faces' margins to failure (-pfault_margins)
+        if margins is not None:
+            paths.append(margins)
     paths.append(subsidence_figure(run_dir, step=step))
     paths.append(histories_figure(run_dir))
     if has_surface(run_dir):

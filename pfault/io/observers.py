@@ -110,14 +110,15 @@ class RunOutput:
     def is_open(self) -> bool:
         return self.fields is not None
 
-    def capture_initial(self) -> None:
+    def capture_initial(self, margins: Any = None) -> None:
         """The output step of the initial state, taken before the first step is solved (its loads, the faces'
-        pore pressure at time 0) and written when the output opens."""
+        pore pressure at time 0; ``margins``: its margins to failure, pfault.margins.MarginStep or None) and
+        written when the output opens."""
         m, state = self.model, self.state
         zeros = np.zeros(m.dofmap.n_local)
         eq = m.equations
         rest = tuple(term.at_rest(load) for term, load in zip(eq.terms, eq.loads.term_loads))
-        values = self.step_values(zeros, eq.local_array(state.u_ref), np.zeros(len(m.mesh.cells)), rest)
+        values = self.step_values(zeros, eq.local_array(state.u_ref), np.zeros(len(m.mesh.cells)), rest, margins)
         self.initial = (values, self.surface.measure(per_side(m, zeros))[1])
 
     def open(self) -> None:
@@ -164,17 +165,19 @@ class RunOutput:
     def _create_writer(self) -> Any:
         return self.create_writer(self.model.settings.output_dir)
 
-    def step_values(self, u_rel: np.ndarray, u_total: np.ndarray, dp: np.ndarray, loads: tuple) -> LocalStep:
+    def step_values(self, u_rel: np.ndarray, u_total: np.ndarray, dp: np.ndarray, loads: tuple,
+                    margins: Any = None) -> LocalStep:
         """This rank's values of one output step (pfault.io.steps.LocalStep): displacements relative to the initial
-        state ``u_rel``, the total state ``u_total``, the pore-pressure change per cell ``dp`` and the terms'
-        loads ``loads`` (one per term)."""
+        state ``u_rel``, the total state ``u_total``, the pore-pressure change per cell ``dp``, the terms'
+        loads ``loads`` (one per term) and the margins to failure (pfault.margins.MarginStep, or None)."""
         m, state = self.model, self.state
         eq = m.equations
         sig = eq.cell_total_stress(u_total, dp, state.sigma0, state.histories, loads).reshape(-1, 9)
         cells: dict = {"pore_pressure_change": dp, "stress": sig}
         faces: dict = {}
-        for term, load, h in zip(eq.terms, loads, state.histories):
-            for series, values in term.fields(u_total, u_rel, load, h).items():
+        parts = [term.fields(u_total, u_rel, load, h) for term, load, h in zip(eq.terms, loads, state.histories)]
+        for fields in parts + ([margins.fields()] if margins is not None else []):
+            for series, values in fields.items():
                 (faces if series == "fault" else cells).update(values)
         return LocalStep(per_side(m, u_rel), m.source.vertex_head(), cells, faces)
 
@@ -183,7 +186,7 @@ class RunOutput:
         with ``fields``."""
         eq = self.model.equations
         values = self.step_values(result.u_rel, eq.local_array(self.state.u), eq.loads.cell_dp(result.t),
-                                  eq.loads.term_loads)
+                                  eq.loads.term_loads, result.record.margins)
         (fields or self.fields).write(result.step, result.t, values, result.surface)
 
     def write_summary(self, summary: dict) -> None:

@@ -226,6 +226,25 @@ class StepSolver:
         ksp.solve(b, x)
         return int(ksp.getConvergedReason())
 
+    def solve_response(self, rhs: Any, du: Any) -> tuple[bool, SolveCost]:
+        """Solve J du = rhs with the Jacobian of the converged state in its configuration (every term keeps its
+        state: a fault's faces stuck, slipping or open) on the step's KSP: the direct solver's factors are kept
+        when they are of that Jacobian or the factor reuse keeps them, refactored otherwise. The Krylov solve stops
+        at -ksp_rtol of |rhs| (the step's absolute tolerance is for its forces). Returns (converged, its cost)."""
+        eq, t0, nfact, njac = self.eq, time.perf_counter(), factorizations(), self.eq.n_jacobians
+        self._jacobian(self.snes, self.state.u, eq.J, eq.J)
+        ksp = self.snes.getKSP()
+        ksp.setOperators(eq.J, eq.J)
+        rtol, atol, divtol, max_it = ksp.getTolerances()
+        ksp.setTolerances(atol=0.0)
+        try:
+            ksp.solve(rhs, du)
+        finally:
+            ksp.setTolerances(rtol=rtol, atol=atol, divtol=divtol, max_it=max_it)
+        cost = SolveCost(0, int(ksp.getIterationNumber()), time.perf_counter() - t0,
+                         int(factorizations() - nfact), int(eq.n_jacobians - njac))
+        return ksp.getConvergedReason() > 0, cost
+
     # -- one step ------------------------------------------------------------------------------------
     def solve_step(self, t: float) -> Solve:
         """Solve for time t from the converged state (at state.time). Nonlinear equations: SNES runs the

@@ -34,13 +34,33 @@ The protocol (methods a term has; collective where it says so):
   "cells": per local cell}).
 - The checkpoint: ``rows`` (what its history's arrays are per: "face" or "cell"), ``history_arrays(history)``
   ({name: array per row}) and ``restored(arrays, x_loc, load)`` the history they hold, started at x_loc.
+- Margins to failure (pfault.margins: the further uniform drawdown its parts take before they fail, from the
+  linear response of a converged state): ``load_rate(t, cell_dp, cell_rate, alpha, out)`` the rate of its load
+  per metre of drawdown (``cell_rate``: Pa/m per local cell), adding the rate of its share of f to ``out``;
+  ``residual_rate(x_loc, load, rate, history, out)`` adds d(its residual)/d(drawdown) at the fixed state x_loc;
+  ``margin_parts(x_loc, load, history)`` how many of its parts, on all ranks, have a margin the response decides
+  (a fault's faces stuck and not broken; none: the response is not solved); collective;
+  ``margins(x_loc, dx_loc, load, rate, history, mesh, settings)`` its margins at x_loc with the state's rate dx_loc
+  (None: it has none), an object with ``fields()`` (as ``fields``) and ``as_json()`` (merged into the step's
+  record); collective.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+
+
+@dataclass(frozen=True)
+class MarginSettings:
+    """What the terms' margins are reported in: the pore-pressure change of a metre of drawdown (``rho_g``, Pa/m),
+    the drawdowns (m) whose areas within the margin are reported (``thresholds``) and the site coordinates of
+    the mesh's origin (``origin``, m)."""
+    rho_g: float
+    thresholds: tuple
+    origin: tuple = (0.0, 0.0, 0.0)
 
 
 class Term(Protocol):
@@ -93,3 +113,13 @@ class Term(Protocol):
     def history_arrays(self, history: Any) -> dict: ...
 
     def restored(self, arrays: dict, x_loc: np.ndarray, load: Any) -> Any: ...
+
+    def load_rate(self, t: float, cell_dp: np.ndarray | None, cell_rate: np.ndarray, alpha: np.ndarray,
+                  out: np.ndarray) -> Any: ...
+
+    def residual_rate(self, x_loc: np.ndarray, load: Any, rate: Any, history: Any, out: np.ndarray) -> None: ...
+
+    def margin_parts(self, x_loc: np.ndarray, load: Any, history: Any) -> int: ...
+
+    def margins(self, x_loc: np.ndarray, dx_loc: np.ndarray, load: Any, rate: Any, history: Any, mesh: Any,
+                settings: MarginSettings) -> Any: ...

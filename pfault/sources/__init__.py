@@ -8,6 +8,10 @@ equations and the output read it with ``cell_dp(t)``, which changes nothing. Eve
 - ``cell_dp(t)``: the pore-pressure change per local cell (Pa) at a time t between the time the source was
   last advanced from and the time it was advanced to (a step cut into sub-steps reads it within the step:
   a flow model's field is interpolated linearly in time there);
+- ``loaded_cells(t)``: the local cells whose pore pressure the source changes (a bool per cell), which a
+  uniform further drawdown lowers (pfault.margins): a table's materials with a table that is not zero, every
+  cell of a flow model (it solves for all of them), the cells of a groundwater model's heads that are inside it
+  and change at some saved time;
 - ``step_record()``: figures of the last advance for the step's record (empty for a table);
 - ``kind`` (``tables``, ``heads``, ``flow``) and ``unchanged(t_end)``: per local cell, whether the source changes
   its pore pressure at no time of [0, t_end] (None where that is known only as the run goes: the flow model's);
@@ -86,6 +90,12 @@ class TableSource:
                           for tab in self.drawdown.tables], dtype=bool)
         return still[self.cell_material] if len(still) else np.ones(len(self.cell_material), dtype=bool)
 
+    def loaded_cells(self, t: float) -> np.ndarray:
+        """The cells of the materials with a table that is not zero throughout."""
+        loaded = np.array([tab is not None and any(v != 0 for v in tab.values) for tab in self.drawdown.tables],
+                          dtype=bool)
+        return loaded[self.cell_material] if len(loaded) else np.zeros(len(self.cell_material), dtype=bool)
+
     def step_record(self) -> dict:
         return {}
 
@@ -146,6 +156,10 @@ class FlowSource:
         """Known only as the flow is solved."""
         return None
 
+    def loaded_cells(self, t: float) -> np.ndarray:
+        """Every cell: the flow model solves for the head of all of them."""
+        return np.ones(len(self._current()), dtype=bool)
+
     def step_record(self) -> dict:
         """The flow's Krylov iterations in its last step and the largest drawdown (m) now (collective)."""
         if not self.flow.history:
@@ -171,16 +185,17 @@ class FlowSource:
 
 
 class Unchanged:
-    """The pore-pressure change of ``source`` except in the cells of ``unchanged`` (bool per local cell), where the
+    """The pore-pressure change of ``source`` except in the cells of ``mask`` (bool per local cell), where the
     pore pressure stays at its initial value (the materials of -pfault_pore_pressure_unchanged_materials: an
     impermeable rock, a clay the wells do not drain): no Biot load there, nor at the fault faces whose minus cell
     it is, and zero in the output's pore_pressure_change. Everything else (advancing, the flow model's head and
-    records, its checkpoint) is the source's."""
+    records, its state) is the source's."""
 
-    def __init__(self, source: Any, unchanged: np.ndarray) -> None:
+    def __init__(self, source: Any, mask: np.ndarray) -> None:
         self.source = source
-        self.unchanged = np.asarray(unchanged, dtype=bool)
+        self.mask = np.asarray(mask, dtype=bool)
         self.has_state = source.has_state
+        self.kind = source.kind
 
     @property
     def active(self) -> bool:
@@ -190,7 +205,15 @@ class Unchanged:
         self.source.advance_to(t)
 
     def cell_dp(self, t: float) -> np.ndarray:
-        return np.where(self.unchanged, 0.0, self.source.cell_dp(t))
+        return np.where(self.mask, 0.0, self.source.cell_dp(t))
+
+    def unchanged(self, t_end: float) -> np.ndarray | None:
+        """The source's unchanged cells and those of the mask (None where the source knows only as it runs)."""
+        inner = self.source.unchanged(t_end)
+        return None if inner is None else inner | self.mask
+
+    def loaded_cells(self, t: float) -> np.ndarray:
+        return self.source.loaded_cells(t) & ~self.mask
 
     def step_record(self) -> dict:
         return self.source.step_record()
@@ -198,11 +221,11 @@ class Unchanged:
     def vertex_head(self) -> np.ndarray | None:
         return self.source.vertex_head()
 
-    def checkpoint(self) -> Any:
-        return self.source.checkpoint()
+    def state(self) -> Any:
+        return self.source.state()
 
-    def restore(self, *args: Any) -> None:
-        self.source.restore(*args)
+    def restore(self, state: Any) -> None:
+        self.source.restore(state)
 
     def destroy(self) -> None:
         self.source.destroy()

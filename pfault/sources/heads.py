@@ -162,6 +162,7 @@ class HeadsSource:
         self.table = table
         self.outside = np.zeros(table.shape[1], dtype=bool) if outside is None else outside
         self.notes = dict(notes or {})
+        self._changed = np.any(table != 0, axis=0)          # per cell: changes at some saved time
 
     @property
     def active(self) -> bool:
@@ -183,6 +184,10 @@ class HeadsSource:
     def unchanged(self, t_end: float) -> np.ndarray:
         """Per local cell: dp is zero at every time of [0, t_end]."""
         return zero_on(self.seconds, self.table, t_end)
+    def loaded_cells(self, t: float) -> np.ndarray:
+        """The cells whose pore pressure changes at some saved time (cells outside the groundwater model, with
+        -pfault_heads_outside zero, never do)."""
+        return self._changed.copy()
 
     def step_record(self) -> dict:
         return {}

@@ -60,14 +60,14 @@ def box_run(tmp_path_factory):
 
 def test_a_run_without_breaking_draws_as_before(box_run):
     """A pre-existing fault (every face broken from the start, no break time): no fissure formed, no fissure figure,
-    no trace on the hazard map, the four figures as before."""
+    no trace on the hazard map, the four figures as before and the fault's margins to failure."""
     from pfault.io import figures as fg
-    from pfault.io import fissures
+    from pfault.io import fissures, margin_map
     b = fissures.read_breaks(str(box_run))
     assert b is not None and len(b.broken) > 0 and not b.broken.any()
     assert fissures.fissure_figure(str(box_run)) is None
     paths = fg.make_figures(str(box_run))
-    assert sorted(p.rsplit("/", 1)[-1] for p in paths) == sorted(fg.FIGURES)
+    assert sorted(p.rsplit("/", 1)[-1] for p in paths) == sorted(fg.FIGURES + (margin_map.FIGURE,))
     assert not (box_run / fissures.FIGURE).exists()
 
 

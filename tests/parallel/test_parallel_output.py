@@ -96,7 +96,7 @@ def test_parallel_checkpoint_equals_the_gathered_one(tmp_path, ranks):
     for step in info["steps"]:
         a, b = _datasets(own / str(step) / "checkpoint.h5"), _datasets(gathered / str(step) / "checkpoint.h5")
         assert sorted(a) == sorted(b) == [
-            "faults", "faults/break_time", "faults/broken", "faults/pn", "faults/slid", "faults/t0", "faults/traction",
+            "faults", "faults/break_time", "faults/broken", "faults/slid", "faults/t0",
             "flow", "flow/head", "flow/history", "input_files", "sigma0",
             "steps", "u", "u/face", "u/vertex", "u_previous", "u_previous/face", "u_previous/vertex", "u_ref",
             "u_ref/face", "u_ref/vertex"], step

@@ -50,7 +50,8 @@ def solve(sim, p, f, x, F, pc):
     smax, smin = ksp.computeExtremeSingularValues()
     # the solution's largest fault jump (stick: the exact answer is zero; penalty: ~ |t| / k)
     dx.axpy(1.0, x)
-    gl = f.law_jumps(p.local_array(dx), p.loads.term_loads[0], sim.state.histories[0])[0]
+    x_loc = p.local_array(dx)
+    gl = f.mean_jumps(x_loc, f.tractions(x_loc) - sim.state.histories[0].t0, p.loads.term_loads[0])[1]
     jump = float(np.max(np.linalg.norm(gl, axis=1), initial=0.0))
     jump = f.faces.mpi.allreduce(jump, op=MPI.MAX)
     ksp.destroy()
