@@ -18,7 +18,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from pfault.io import head_files
+from pfault.sources import head_files
 from pfault.io.mf6_write import write_dis_grb, write_heads
 from pfault.sources.heads import HeadsSettings, build_heads_source
 

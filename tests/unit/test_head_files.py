@@ -25,6 +25,7 @@ from pfault.io.mf6_write import write_dis_grb, write_disv_grb, write_heads
 from pfault.physics.loading import MaterialDrawdown, Table
 from pfault.sources import TableSource, lookup, zero_on
 from pfault.sources.coverage import measure
+from pfault.sources.head_files import read_mf6_grid
 from pfault.sources.heads import HeadsSettings, HeadsSource, build_heads_source, check_heads_files
 
 RHO_G = 1000.0 * 9.80665
@@ -127,7 +128,6 @@ def flopy_cells(mg, x, y, z, ncpl):
 
 @pytest.mark.parametrize("kind", ["DIS", "DISV"])
 def test_cell_of_a_point_is_flopys(tmp_path, kind):
-    from pfault.io.head_files import read_mf6_grid
     if kind == "DIS":
         path, *_ = dis_model(tmp_path, angrot=30.0, xorigin=500.0, yorigin=-300.0)
         box = (470, 565, -305, -218)
