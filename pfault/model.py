@@ -16,11 +16,12 @@ from typing import Any
 import numpy as np
 from petsc4py import PETSc
 
-from . import checks, fields, properties, scene as scn
+from . import checks, fields, scene as scn
 from .assembly.elastic import ElasticAssembler
 from .effects import logged
 from .effects import decide as decide_effects
 from .errors import InputError, run_on_root, warn
+from .materials import properties
 from .mesh import distributed
 from .solver.equations import Equations, constrained_local
 from .solver.choice import AUTO, ITERATIVE_FROM_DOFS, solver_file_name
@@ -64,7 +65,7 @@ class Model:
     rank owns (pfault.fields.FaceRows), ``source`` the pore-pressure
     source, ``equations`` the discrete problem with its terms (a fault interface: ``equations.terms``),
     ``solver_file`` the solver options file applied (None: none); ``properties`` the materials' properties per
-    local cell (pfault.properties.CellProperties)."""
+    local cell (pfault.materials.properties.CellProperties)."""
     comm: Any
     scene: Scene
     serial: Any
@@ -168,7 +169,7 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
 
 def _field_values(scene: Scene, serial: Any, options_file: str) -> tuple[dict, list]:
     """Rank 0: the material properties given as fields, on the serial cells ({option: values}; empty without
-    fields), and the notes on how their files were read (pfault.io.field_files.SpatialField.note)."""
+    fields), and the notes on how their files were read (pfault.materials.field_files.SpatialField.note)."""
     refs = properties.field_refs(scene.materials, scene.flow_settings)
     notes: list = []
     if not refs:

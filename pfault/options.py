@@ -13,6 +13,7 @@ from types import ModuleType
 from typing import Any
 
 from .errors import InputError, collective_check, exit_code_table
+from .materials.properties import FIELD_PREFIX, parse_field
 from .units import parse_list, parse_quantity, parse_table
 
 
@@ -340,8 +341,7 @@ class OptionReader:
         if kind in ("real", "quantity"):
             return parse_quantity(text, name, spec.unit)
         if kind == "property":
-            # a number, or field:FILE[,variable=NAME][,outside=error|nearest] (pfault.properties)
-            from .properties import FIELD_PREFIX, parse_field
+            # a number, or field:FILE[,variable=NAME][,outside=error|nearest] (pfault.materials.properties)
             if str(text).strip().startswith(FIELD_PREFIX):
                 return parse_field(str(text), name, spec.unit)
             return parse_quantity(text, name, spec.unit)

@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import InputError
 from .physics.loading import MaterialDrawdown, Table
-from .properties import FieldRef, is_field
+from .materials.properties import FieldRef, is_field
 from .units import UNITS, format_duration, quantity_unit
 
 if TYPE_CHECKING:
@@ -26,8 +26,8 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Material:
-    """A material's properties as its options give them: a number (SI), or a field (pfault.properties.FieldRef)
-    interpolated at the cells' centroids; the model turns them into per-cell arrays (pfault.properties)."""
+    """A material's properties as its options give them: a number (SI), or a field (pfault.materials.properties.FieldRef)
+    interpolated at the cells' centroids; the model turns them into per-cell arrays (pfault.materials.properties)."""
     name: str
     young_modulus: float | FieldRef
     poisson_ratio: float | FieldRef

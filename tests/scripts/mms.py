@@ -18,7 +18,7 @@ from pfault.mesh import distributed  # noqa: E402
 from pfault.mesh.box import box_mesh  # noqa: E402
 from pfault.physics import elasticity as el  # noqa: E402
 from pfault.physics.loading import MaterialDrawdown  # noqa: E402
-from pfault.properties import CellProperties  # noqa: E402
+from pfault.materials.properties import CellProperties  # noqa: E402
 from pfault.scene import Material  # noqa: E402
 from pfault.solver.equations import Equations  # noqa: E402
 from pfault.sources import TableSource  # noqa: E402

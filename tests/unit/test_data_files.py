@@ -8,7 +8,7 @@ import pytest
 
 from pfault.errors import InputError
 from pfault.io import provenance
-from pfault.io.field_files import read_field
+from pfault.materials.field_files import read_field
 from pfault.sources.head_files import read_mf6_grid
 from pfault.io.stations import read_stations
 from pfault.mesh.gmsh_io import read_msh
