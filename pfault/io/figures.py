@@ -17,7 +17,7 @@ writes them into any RUN_DIR (an interrupted run's too):
   (like Figs 4 and 7);
 - ``histories.png``: maximum subsidence, opening, slip (and drawdown) against time from summary.json, with
   the Newton iterations and factorisations per step;
-- ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.io.hazard): largest
+- ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.hazard): largest
   horizontal principal strain and angular distortion, with the fault traces and the maxima marked, and the traces
   of the fissures that formed and reached the land surface (pfault.io.fissures);
 - ``fissure_break.png`` (faults with a tensile strength that broke, pfault.io.fissures): each fault's broken
@@ -550,7 +550,7 @@ def histories_figure(run_dir: str, out: str | None = None) -> str:
 
 def read_surface(run_dir: str, step: int = -1) -> Snapshot:
     """Land-surface triangles and fields at one time: point data ``displacement`` (m), cell data
-    ``horizontal_strain``, ``angular_distortion`` (pfault.io.hazard)."""
+    ``horizontal_strain``, ``angular_distortion`` (pfault.hazard)."""
     return _read_series(os.path.join(run_dir, "surface.xdmf"), step, "triangle")
 
 
@@ -622,10 +622,10 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
 def _fissure_prone_outline(ax: Any, run_dir: str, pts: np.ndarray, tris: np.ndarray, strain: np.ndarray, t: float,
                            km: float) -> None:
     """The border of the triangles whose strain exceeds summary.json's hazard_strain_threshold, labelled with
-    the fissure-prone length of the step at time t (pfault.io.hazard); nothing for a run without them. A fault's
+    the fissure-prone length of the step at time t (pfault.hazard); nothing for a run without them. A fault's
     trace inside the zone is no border: its two sides' copies of a vertex are one point (hazard.same_place)."""
     from matplotlib.collections import LineCollection
-    from .hazard import same_place
+    from ..hazard import same_place
     summary = read_summary(run_dir)
     threshold = summary.get("hazard_strain_threshold")
     if threshold is None or not np.any(strain > threshold):

@@ -300,7 +300,7 @@ def _rings(triangles: np.ndarray, xy: np.ndarray) -> list[np.ndarray]:
 def hazard_layer(run_dir: str, ctx: GisContext) -> list[Layer]:
     """hazard_zones: per edge-connected zone of triangles whose horizontal strain exceeds the threshold at the
     last output time, its outline (holes included), area and peak strain."""
-    from .hazard import _zones
+    from ..hazard import _zones
     points, tris, steps = _surface_steps(run_dir)
     _, t, _, strain, _ = steps[-1]
     prone = strain > ctx.threshold

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .hazard import summary_maxima
+from ..hazard import summary_maxima
 
 
 class RunSummary:

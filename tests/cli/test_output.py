@@ -20,6 +20,8 @@ import pytest
 
 from conftest import OEDOMETER, QUERETARO, REPO, WUXI, command, compare_runs, mpi_env, run_scene
 
+from pfault import hazard
+
 QRO = QUERETARO
 # -flow_ksp_rtol 1e-13: 2-rank flow solves are reproducible from run to run only to ~ksp_rtol; -ksp_atol 0: the
 # fault steps' Krylov solves run to -ksp_rtol, not to their default stop at a tenth of the step's tolerance,
@@ -364,7 +366,6 @@ def test_run_writer_stages_commits_and_abandons(tmp_path):
 # ------------------------------------------------------------------------------------------------------
 def test_hazard_fields_of_an_affine_displacement():
     """For u = A (x, y) + c the strain and tilt are exact on any triangles."""
-    from pfault.io import hazard
     rng = np.random.default_rng(3)
     pts = np.column_stack([rng.random((30, 2)) * 100.0, np.zeros(30)])
     tris = np.array([rng.choice(30, 3, replace=False) for _ in range(40)])
