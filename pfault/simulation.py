@@ -9,10 +9,9 @@ from typing import Any
 import numpy as np
 from petsc4py import PETSc
 
-from . import run as loop
+from . import provenance, run as loop
 from .effects import EffectCosts
 from .errors import InputError
-from .io import provenance
 from .io.observations import Observations, read_observation_settings
 from .io.summary import RunSummary
 from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLine, RunOutput, SummaryObserver,

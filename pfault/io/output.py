@@ -5,7 +5,7 @@ pfault.io.parallel).
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
 - ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
 - ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash;
-  ``input_files.json``: the data files the run read, with their sizes and SHA-256 (pfault.io.provenance)
+  ``input_files.json``: the data files the run read, with their sizes and SHA-256 (pfault.provenance)
 - ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima, wall times and each rank's
   peak memory
 - ``checkpoint.h5``: the state after the last completed step (pfault.io.checkpoint)

@@ -27,9 +27,10 @@ import json
 import os
 from typing import Any
 
-from ..errors import InputError, run_on_root, warn
-from ..paths import beside_scene
-from ..materials.properties import field_refs
+from .errors import InputError, run_on_root, warn
+from .io.output import open_h5
+from .materials.properties import field_refs
+from .paths import beside_scene
 
 JSON_NAME = "input_files.json"      # in the run directory, beside options.txt and versions.json
 DATASET = "input_files"             # JSON dataset of checkpoint.h5
@@ -81,7 +82,6 @@ def record(comm: Any, files: list[tuple[str, str]]) -> list[dict[str, Any]]:
 
 def recorded(run_dir: str, checkpoint_name: str) -> list[dict[str, Any]] | None:
     """The record in the checkpoint ``checkpoint_name`` of ``run_dir``, None when it has none (rank 0)."""
-    from .output import open_h5
     with open_h5(os.path.join(run_dir, checkpoint_name), "r") as h5:
         if DATASET not in h5:
             return None
