@@ -174,7 +174,7 @@ def test_los_raster_on_an_insar_products_pixels(run_dir, tmp_path):
     LOS there (its per-pixel LOS equal to the scene's), no-data off the land surface, and the product's CRS."""
     from pyproj import CRS
     from pfault.io.insar import read_netcdf
-    from pfault.io.insar_write import write_opera
+    from pfault.tools.insar_write import write_opera
     regular = read_netcdf(str(run_dir / "insar_los.nc"))
     x = np.r_[regular["x"][0] - 25.0, regular["x"], regular["x"][-1] + 25.0]
     y = np.r_[regular["y"][0] - 25.0, regular["y"], regular["y"][-1] + 25.0]
@@ -202,7 +202,7 @@ def test_product_and_scene_crs_must_both_be_given(tmp_path):
     from pyproj import CRS
     from pfault.errors import InputError
     from pfault.io.insar_grid import locate_product_pixels
-    from pfault.io.insar_write import write_opera
+    from pfault.tools.insar_write import write_opera
     when = dt.datetime(2016, 1, 1, tzinfo=dt.timezone.utc)
     x = y = np.array([25.0, 75.0])
     product = write_opera(str(tmp_path / "p.nc"), x, y, CRS.from_epsg(32650), [when], [when], np.zeros((1, 2, 2)))

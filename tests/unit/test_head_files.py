@@ -1,6 +1,6 @@
 """A groundwater model's heads as a pore-pressure source (pfault.sources.heads), in-process on one rank:
 
-- MODFLOW 6 grid (DIS, DISV) and head files written from NumPy (pfault.io.mf6_write) read back unchanged by flopy;
+- MODFLOW 6 grid (DIS, DISV) and head files written from NumPy (pfault.tools.mf6_write) read back unchanged by flopy;
 - the cell of a point (DIS with rotation, DISV of triangles and quadrilaterals, the layer from TOP/BOTM) equals
   flopy's own grid intersection;
 - a head field varying in x gives each cell the head of the MODFLOW cell of its centroid, linear in time between
@@ -21,12 +21,12 @@ from flopy.mf6.utils import MfGrdFile
 from mpi4py import MPI
 
 from pfault.errors import InputError
-from pfault.io.mf6_write import write_dis_grb, write_disv_grb, write_heads
 from pfault.physics.loading import MaterialDrawdown, Table
 from pfault.sources import TableSource, lookup, zero_on
 from pfault.sources.coverage import measure
 from pfault.sources.head_files import read_mf6_grid
 from pfault.sources.heads import HeadsSettings, HeadsSource, build_heads_source, check_heads_files
+from pfault.tools.mf6_write import write_dis_grb, write_disv_grb, write_heads
 
 RHO_G = 1000.0 * 9.80665
 

@@ -11,9 +11,9 @@ import pytest
 from pyproj import CRS
 
 from pfault.errors import InputError
-from pfault.io.insar_write import write_mintpy, write_opera
 from pfault.tools.insar_fit import _at, parse_reference
 from pfault.tools.insar_input import read_insar_product
+from pfault.tools.insar_write import write_mintpy, write_opera
 
 UTC = dt.timezone.utc
 DATES = [dt.datetime(2016 + k, 3, 1, tzinfo=UTC) for k in range(4)]
