@@ -39,6 +39,7 @@ from .figures import read_options
 from .geopackage import Layer, write_geopackage
 from .output import open_h5
 from .probes import _pixels_in_triangles
+from .rasters import add_grid_mapping, write_geotiff
 
 DIR = "gis"
 STATE_NAMES = ("stick", "slip", "open")
@@ -121,27 +122,6 @@ def pixel_map(xy: np.ndarray, triangles: np.ndarray, spacing: float | None) -> P
     return PixelMap(x, y, pixel[one], flat[k[one]], lam[one])
 
 
-def write_geotiff(path: str, x: np.ndarray, y: np.ndarray, values: np.ndarray, crs: Any,
-                  tags: dict | None = None) -> str:
-    """A one-band float64 GeoTIFF of ``values`` (ny, nx) on pixel centres ``x``, ``y`` (regular, ascending; written
-    north up), NaN no-data, in ``crs`` (pyproj); ``tags``: metadata of the band (units, time)."""
-    import rasterio
-    from affine import Affine
-    dx = float(x[1] - x[0]) if len(x) > 1 else 1.0
-    dy = float(y[1] - y[0]) if len(y) > 1 else dx
-    transform = Affine(dx, 0.0, float(x[0]) - dx / 2, 0.0, -dy, float(y[-1]) + dy / 2)
-    tmp = path + ".tmp.tif"
-    with rasterio.open(tmp, "w", driver="GTiff", width=len(x), height=len(y), count=1, dtype="float64",
-                       crs=rasterio.crs.CRS.from_wkt(crs.to_wkt()), transform=transform, nodata=np.nan,
-                       compress="deflate") as dst:
-        dst.write(np.asarray(values, dtype=np.float64)[::-1], 1)
-        if tags:
-            dst.update_tags(1, **{k: str(v) for k, v in tags.items()})
-            dst.set_band_description(1, str(tags.get("long_name", "")))
-    os.replace(tmp, path)
-    return path
-
-
 def _surface_steps(run_dir: str) -> tuple[np.ndarray, np.ndarray, list]:
     """surface.h5: its points (mesh coordinates), triangles, and per output time (step, time, displacement,
     horizontal strain, angular distortion)."""
@@ -207,14 +187,6 @@ def write_maps_netcdf(path: str, x: np.ndarray, y: np.ndarray, times: np.ndarray
             v.attrs.update({"units": unit, "long_name": long, "grid_mapping": "spatial_ref"})
     os.replace(tmp, path)
     return path
-
-
-def add_grid_mapping(nc: Any, crs: Any, name: str = "spatial_ref") -> None:
-    """The CF grid-mapping variable ``name`` of ``crs`` in an open h5netcdf file (a scalar int holding the CRS in
-    its attributes; pfault.georef.cf_grid_mapping)."""
-    from ..georef import cf_grid_mapping
-    v = nc.create_variable(name, (), np.int32, data=np.int32(0))
-    v.attrs.update(cf_grid_mapping(crs))
 
 
 def los_geotiffs(run_dir: str, ctx: GisContext, out: str) -> list[str]:

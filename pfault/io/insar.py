@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import InputError, run_on_root
 from .observers import Observer
 from .probes import Located, PointProbe, Raster
+from .rasters import add_grid_mapping
 
 NC_NAME = "insar_los.nc"
 PNG_NAME = "insar_los.png"
@@ -201,7 +202,6 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int
 def _write_georef(nc: Any, raster: Raster, los: np.ndarray, crs: Any) -> None:
     """The grid mapping of ``crs`` (and the data variables' ``grid_mapping``), and a per-pixel LOS."""
     if crs is not None:
-        from .gis import add_grid_mapping
         add_grid_mapping(nc, crs)
         for name in ("los_displacement", "los_velocity"):
             nc.variables[name].attrs["grid_mapping"] = "spatial_ref"

@@ -12,7 +12,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from ..io.gis import add_grid_mapping
+from ..io.rasters import add_grid_mapping
 
 EPOCH = "seconds since 1970-01-01 00:00:00"
 
