@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from pfault.io import figures as fg  # noqa: E402
+from pfault.post import figures as fg  # noqa: E402
 
 FISSURE = "config/hard/fissure_box.opts"
 MESHES = {"h": ("16,8,10", 8.0e6 / math.sqrt(62.5)), "h/2": ("32,16,20", 8.0e6 / math.sqrt(15.625))}

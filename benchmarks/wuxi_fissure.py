@@ -22,8 +22,8 @@ import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
-from pfault.io import figures as fg  # noqa: E402
-from pfault.io import fissures  # noqa: E402
+from pfault.post import figures as fg  # noqa: E402
+from pfault.post import fissures  # noqa: E402
 from studies.run import run_logged  # noqa: E402
 
 SCENES = {"plain": "config/wuxi.opts", "fissure": "config/wuxi_fissure.opts"}
@@ -54,7 +54,7 @@ def run(name: str, args: argparse.Namespace) -> dict | None:
 
 
 def history(run_dir: str) -> list[dict]:
-    """The fissure at every output time of a run (pfault.io.fissures.history): broken faces, depth, surface
+    """The fissure at every output time of a run (pfault.post.fissures.history): broken faces, depth, surface
     length, largest opening of a broken face."""
     last = fissures.read_breaks(run_dir)
     if last is None:

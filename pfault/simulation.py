@@ -185,7 +185,7 @@ class Simulation:
             self.output.finish(summary, self.model.scene.figures)
             if self.gis and self.output.writer is not None:
                 t0 = time.perf_counter()
-                from .io.gis import write_gis
+                from .post.gis import write_gis
                 written = write_gis(self.output.writer.dir)
                 PETSc.Sys.Print(f"pfault: {len(written)} GIS files in gis/ in {time.perf_counter() - t0:.1f} s")
 

@@ -11,7 +11,7 @@ reference machine has 2 cores), with stdout in ``runs/<run>/stdout.txt`` and the
 (command, exit code, end-to-end wall time including MPI start-up and imports, CPU time, load average
 during the run) in ``runs/<run>/casestudy.json``. ``<run>`` is the case name, suffixed ``-<tag>``,
 ``-<solver>`` for a solver other than mumps and ``-f<factor>`` for a mesh size factor other than 1. Then
-the figures of pfault.io.figures are written into each run directory and ``runs/README.md`` is
+the figures of pfault.post.figures are written into each run directory and ``runs/README.md`` is
 regenerated from every run directory found.
 
 The paper's figures are the ones quoted in its text (nothing digitised from its plots): where it gives a
@@ -27,7 +27,7 @@ import re
 import sys
 import time
 
-from pfault.io import figures as fg
+from pfault.post import figures as fg
 
 from .run import REPO, command, cpu_model, run_logged, shown
 

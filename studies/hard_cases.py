@@ -121,7 +121,7 @@ class RunResult:
                 and all(s["converged"] for s in self.steps))
 
     def fault(self, step=-1):
-        from pfault.io import figures as fg
+        from pfault.post import figures as fg
         return fg.read_fault(self.dir, step)
 
 
@@ -210,7 +210,7 @@ def path_independence(ref, tol=1e-6):
 def reopening(t_open, t_closed, t_reopen, tol=0.05, closed_share=0.2):
     """Load cycle (times in years): the fissure open at t_open closes at t_closed (at most ``closed_share`` of the
     open faces stay open) and reopens at t_reopen to the opening field of t_open (relative difference)."""
-    from pfault.io import figures as fg
+    from pfault.post import figures as fg
 
     def evaluate(res, runs):
         snaps = {}

@@ -30,7 +30,7 @@ class ObservationSettings:
 def read_observation_settings(reader: Any, scene_file: str = "") -> ObservationSettings:
     """The observation options; a relative station file is taken from the working directory, else beside the
     scene file (pfault.paths.beside_scene)."""
-    spacing = reader.get("pfault_map_spacing")      # used by pfault.io.gis from options.txt
+    spacing = reader.get("pfault_map_spacing")      # used by pfault.post.gis from options.txt
     if spacing is not None and not spacing > 0:
         raise InputError(f"-pfault_map_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
     return ObservationSettings(beside_scene(reader.get("pfault_stations"), scene_file),

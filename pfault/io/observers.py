@@ -18,7 +18,7 @@ from ..errors import EXIT_NOT_CONVERGED, InputError, OutputError, run_on_root
 from ..mesh.fault import output_mesh
 from ..run import per_side
 from . import checkpoint, parallel
-from .figures import write_run_figures
+from ..post.figures import write_run_figures
 from .output import RunWriter, record_failure
 from .steps import LocalStep, StepOutput
 from .summary import RunSummary

@@ -1,4 +1,4 @@
-"""Figures of fissures that formed (pfault.io.fissures): the break map of each fault with broken faces and the
+"""Figures of fissures that formed (pfault.post.fissures): the break map of each fault with broken faces and the
 traces on the hazard map of the fissures that reached the land surface.
 
 The run directory is a real one (the fissure box, config/hard/fissure_box.opts, 2 steps on 1 rank: a vertical
@@ -61,8 +61,8 @@ def box_run(tmp_path_factory):
 def test_a_run_without_breaking_draws_as_before(box_run):
     """A pre-existing fault (every face broken from the start, no break time): no fissure formed, no fissure figure,
     no trace on the hazard map, the four figures as before."""
-    from pfault.io import figures as fg
-    from pfault.io import fissures
+    from pfault.post import figures as fg
+    from pfault.post import fissures
     b = fissures.read_breaks(str(box_run))
     assert b is not None and len(b.broken) > 0 and not b.broken.any()
     assert fissures.fissure_figure(str(box_run)) is None
@@ -77,8 +77,8 @@ def test_fissure_history_measured_and_drawn(box_run, tmp_path):
     years); the figures: fissure_break.png and the hazard map with the trace."""
     import shutil
 
-    from pfault.io import figures as fg
-    from pfault.io import fissures
+    from pfault.post import figures as fg
+    from pfault.post import fissures
     run_dir = tmp_path / "box"
     shutil.copytree(box_run, run_dir)
     t = _write_history(run_dir)

@@ -1,4 +1,4 @@
-"""The GIS layers of a run with -pfault_crs (pfault.io.gis), read back with GDAL/OGR (Debian's python3-gdal), as
+"""The GIS layers of a run with -pfault_crs (pfault.post.gis), read back with GDAL/OGR (Debian's python3-gdal), as
 QGIS reads them: one run of a small fissure box (a candidate surface that breaks to the land surface, stations, a
 LOS raster) placed in UTM zone 50N, checked for
 

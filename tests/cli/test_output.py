@@ -389,7 +389,7 @@ def test_plain_run_writes_figures_and_the_fissure_hazard_map(tmp_path):
     for name in ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"):
         with open(run_dir / name, "rb") as fh:
             assert fh.read(8) == b"\x89PNG\r\n\x1a\n", name
-    from pfault.io import figures as fg
+    from pfault.post import figures as fg
     surf = fg.read_surface(str(run_dir))
     strain, tilt = surf.cell_data["horizontal_strain"], surf.cell_data["angular_distortion"]
     i = int(np.argmax(strain))

@@ -27,7 +27,7 @@ import pytest
 
 from conftest import FISSURE_BOX, compare_runs, run_scene
 from pfault.faults import contact as ct
-from pfault.io import figures as fg
+from pfault.post import figures as fg
 
 E, NU = 10e6, 0.25
 G = E / (2 * (1 + NU))

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import QUERETARO, WUXI, run_scene
-from pfault.io import figures as fg
+from pfault.post import figures as fg
 
 SMALL = ("-pfault_mesh_size_factor", "4", "-pfault_time_steps", "3")
 WUXI_CREST_X = 1000.0

@@ -12,7 +12,7 @@ import pytest
 
 from conftest import FISSURE_BOX, QUERETARO, TWO_BLOCKS, WUXI, run_scene
 from pfault.faults import contact as ct
-from pfault.io import figures as fg
+from pfault.post import figures as fg
 
 ABS = 1e-9          # m
 REL = 1e-8          # of the largest jump of the step

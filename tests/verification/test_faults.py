@@ -313,7 +313,7 @@ def test_fault_pore_pressure_clamped_above_the_lowered_water_table(runs, ranks, 
     """t_N,eff - t_N = alpha p with p = rho_w g (-z - drawdown) at the face centroid (alpha = 1): clamped at 0 by
     default (faces at z = -1/6, -1/3 lie above the lowered water table at z = -0.5: dry), negative with
     -pfault_contact_suction true; the faces below (z = -2/3, -5/6) carry p > 0 either way."""
-    from pfault.io import figures as fg
+    from pfault.post import figures as fg
     s, f, out = runs("water_table", ranks, ["-pfault_contact_suction", "true" if suction else "false"])
     assert s["converged"]
     fault = fg.read_fault(str(out))

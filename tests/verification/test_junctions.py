@@ -23,7 +23,7 @@ import pytest
 
 from conftest import read_last_step, run_scene, run_script
 from pfault.faults import contact as ct
-from pfault.io import figures as fg
+from pfault.post import figures as fg
 
 E, NU = 10.0e6, 0.25
 LX, LY, LZ = 4.0, 4.0, 2.0

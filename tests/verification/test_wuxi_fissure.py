@@ -69,8 +69,8 @@ def test_whole_plane_broken_and_open_at_the_end_as_the_plain_scene(runs):
     """At 10 years: every face broken (area, depth 5 m, length 5,000 m of the plane), the fissure at the land
     surface from its first break on (it starts there), at most 15 Newton iterations in a step, the opening and
     subsidence of the plain scene."""
-    from pfault.io import figures as fg
-    from pfault.io import fissures
+    from pfault.post import figures as fg
+    from pfault.post import fissures
     base, s = runs
     fis = s["fissure"]
     assert fis["converged"] and max(r["newton_its"] for r in fis["steps"]) <= 15

@@ -2,7 +2,7 @@
 
 A run writes them at its end (``-pfault_figures``, default true; pfault.simulation), and
 
-    python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]
+    python -m pfault.post.figures RUN_DIR [RUN_DIR ...] [--step K]
 
 writes them into any RUN_DIR (an interrupted run's too):
 
@@ -19,8 +19,8 @@ writes them into any RUN_DIR (an interrupted run's too):
   the Newton iterations and factorisations per step;
 - ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.hazard): largest
   horizontal principal strain and angular distortion, with the fault traces and the maxima marked, and the traces
-  of the fissures that formed and reached the land surface (pfault.io.fissures);
-- ``fissure_break.png`` (faults with a tensile strength that broke, pfault.io.fissures): each fault's broken
+  of the fissures that formed and reached the land surface (pfault.post.fissures);
+- ``fissure_break.png`` (faults with a tensile strength that broke, pfault.post.fissures): each fault's broken
   faces coloured by the year they broke, intact faces grey, with the fissure's depth, length and first break;
 - ``insar_los.png`` (``-pfault_insar_los``): the LOS raster's displacement and velocity at its last time
   (pfault.io.insar).
@@ -653,7 +653,7 @@ def make_figures(run_dir: str, step: int = -1) -> list[str]:
     paths.append(histories_figure(run_dir))
     if has_surface(run_dir):
         paths.append(hazard_figure(run_dir, step=step))
-    from .insar import insar_figure
+    from ..io.insar import insar_figure
     insar = insar_figure(run_dir)       # the LOS raster's last time (-pfault_insar_los)
     if insar is not None:
         paths.append(insar)
@@ -668,16 +668,16 @@ def write_run_figures(run_dir: str) -> list[str]:
         return make_figures(run_dir)
     except Exception as exc:          # noqa: BLE001 (plotting must not turn a finished run into a failure)
         sys.stderr.write(f"pfault: warning: figures not written ({type(exc).__name__}: {exc}); "
-                         f"python -m pfault.io.figures {run_dir} makes them\n")
+                         f"python -m pfault.post.figures {run_dir} makes them\n")
         return []
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]``: the figures of each run directory; exit
+    """``python -m pfault.post.figures RUN_DIR [RUN_DIR ...] [--step K]``: the figures of each run directory; exit
     code 1 when one is not a pfault run directory."""
     import argparse
     import sys
-    ap = argparse.ArgumentParser(prog="python -m pfault.io.figures", description=__doc__.splitlines()[0],
+    ap = argparse.ArgumentParser(prog="python -m pfault.post.figures", description=__doc__.splitlines()[0],
                                  epilog=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="a pfault output directory")
     ap.add_argument("--step", type=int, default=-1, help="output time index (default -1: the last)")

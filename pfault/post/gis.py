@@ -1,5 +1,5 @@
 """A run's answer as GIS layers in ``gis/`` (``-pfault_crs``), read from the run's files at its end, or by ``python -m
-pfault.io.gis RUN_DIR`` for any run directory written with a CRS:
+pfault.post.gis RUN_DIR`` for any run directory written with a CRS:
 
 - rasters, each a GeoTIFF with its CRS and geotransform (GDAL, QGIS, ArcGIS, rasterio): ``subsidence.tif`` (m,
   downward positive), ``horizontal_strain.tif`` (largest principal horizontal strain, tension positive) and
@@ -36,10 +36,10 @@ import numpy as np
 
 from . import fissures
 from .figures import read_options
-from .geopackage import Layer, write_geopackage
-from .output import open_h5
-from .probes import _pixels_in_triangles
-from .rasters import add_grid_mapping, write_geotiff
+from ..io.geopackage import Layer, write_geopackage
+from ..io.output import open_h5
+from ..io.probes import _pixels_in_triangles
+from ..io.rasters import add_grid_mapping, write_geotiff
 
 DIR = "gis"
 STATE_NAMES = ("stick", "slip", "open")
@@ -192,7 +192,7 @@ def write_maps_netcdf(path: str, x: np.ndarray, y: np.ndarray, times: np.ndarray
 def los_geotiffs(run_dir: str, ctx: GisContext, out: str) -> list[str]:
     """insar_los.tif and insar_los_velocity.tif: the LOS raster's last output time, in the raster's CRS."""
     from ..georef import crs_from_cf
-    from .insar import read_netcdf
+    from ..io.insar import read_netcdf
     path = os.path.join(run_dir, "insar_los.nc")
     if not os.path.exists(path):
         return []
@@ -328,7 +328,7 @@ def station_outputs(run_dir: str, ctx: GisContext, out: str) -> tuple[list[str],
         lines += [f"{name},{d.date().isoformat() if d else ''},{f'{decimal_year(d):.6f}' if d else ''},"
                   f"{s!r},{e:.4f},{n:.4f},{v:.4f}\n" for d, s, (e, n, v) in zip(when, t.tolist(), enu)]
         last.append(enu[-1])
-    from .output import replace_text
+    from ..io.output import replace_text
     path = os.path.join(out, "stations_enu.csv")
     replace_text(path, "".join(lines))
     last = np.array(last).reshape(-1, 3)
@@ -359,17 +359,17 @@ def write_gis(run_dir: str) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m pfault.io.gis RUN_DIR``: (re)write the run's GIS layers."""
+    """``python -m pfault.post.gis RUN_DIR``: (re)write the run's GIS layers."""
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 1 or not os.path.isdir(args[0]):
-        sys.stderr.write("usage: python -m pfault.io.gis RUN_DIR  (a run written with -pfault_crs)\n")
+        sys.stderr.write("usage: python -m pfault.post.gis RUN_DIR  (a run written with -pfault_crs)\n")
         return 2
     written = write_gis(args[0])
     if not written:
-        sys.stderr.write(f"pfault.io.gis: error: {args[0]}: the run has no CRS (summary.json georef); run the scene "
+        sys.stderr.write(f"pfault.post.gis: error: {args[0]}: the run has no CRS (summary.json georef); run the scene "
                          "with -pfault_crs\n")
         return 1
-    print(f"pfault.io.gis: {len(written)} files in {os.path.join(args[0], DIR)}")
+    print(f"pfault.post.gis: {len(written)} files in {os.path.join(args[0], DIR)}")
     return 0
 
 

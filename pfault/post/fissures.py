@@ -11,7 +11,7 @@ run whose faults have no strength) has no fissure figure, and its hazard map is 
   surface, its length along the land-surface trace, its broken area, the largest opening of its broken faces,
   the time of the first break and the time the fissure reached the land surface; below them, the fissures' depth,
   surface length and largest opening against time (``history``);
-- on ``hazard_map.png`` (pfault.io.figures.hazard_figure, ``draw_surface_traces``): the traces on the land
+- on ``hazard_map.png`` (pfault.post.figures.hazard_figure, ``draw_surface_traces``): the traces on the land
   surface of the fissures that reached it: the edges of broken faces whose two vertices lie on the land surface.
 
 The land surface is that of surface.h5 (``-pfault_ground_surface``: a vertex of the fault is on it when a point of
@@ -57,7 +57,7 @@ def read_breaks(run_dir: str, step: int = -1, time: float | None = None) -> Brea
     path = os.path.join(run_dir, "fault.h5")
     if not os.path.exists(path):
         return None
-    from .output import open_h5
+    from ..io.output import open_h5
     with open_h5(path, "r") as f:
         groups = [f["steps"][k] for k in sorted(f.get("steps", {}))]
         if not groups:
@@ -85,7 +85,7 @@ def on_land_surface(run_dir: str, points: np.ndarray) -> np.ndarray:
     else those on the plane z = max z."""
     path = os.path.join(run_dir, "surface.h5")
     if os.path.exists(path):
-        from .output import open_h5
+        from ..io.output import open_h5
         with open_h5(path, "r") as f:
             surf = f["mesh/points"][...]
         keys = np.concatenate([surf, points])
