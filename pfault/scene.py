@@ -26,8 +26,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Material:
-    """A material's properties as its options give them: a number (SI), or a field (pfault.materials.properties.FieldRef)
-    interpolated at the cells' centroids; the model turns them into per-cell arrays (pfault.materials.properties)."""
+    """A material's properties as its options give them: a number (SI), or a field
+    (pfault.materials.properties.FieldRef) interpolated at the cells' centroids; the model turns them into per-cell
+    arrays (pfault.materials.properties)."""
     name: str
     young_modulus: float | FieldRef
     poisson_ratio: float | FieldRef

@@ -12,8 +12,9 @@ its triangle lies; pixels whose centre is outside the land surface are no-data.
 ``insar_los.nc`` (CF-1.8 NetCDF-4, readable by GDAL/QGIS, xarray and the netCDF library): coordinates ``x``,
 ``y`` (m, site coordinates) and ``time`` (s from the start of the scene), variables ``los_displacement`` (m) and
 ``los_velocity`` (m s-1; no-data at the first time) on (time, y, x), with _FillValue at pixels outside the land
-surface, and ``step`` (the step number of each time). The figure ``insar_los.png`` maps the last time's LOS
-displacement and velocity. A restart keeps the times of the run it continues up to its checkpoint's step.
+surface, and ``step`` (the step number of each time). The figure ``insar_los.png`` (pfault.post.figures) maps the
+last time's LOS displacement and velocity; the observer is pfault.io.observations.InsarObserver. A restart keeps the
+times of the run it continues up to its checkpoint's step.
 """
 
 from __future__ import annotations
@@ -25,9 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, run_on_root
-from .observers import Observer
-from .probes import Located, PointProbe, Raster
+from ..errors import InputError
+from .probes import Raster
 from .rasters import add_grid_mapping
 
 NC_NAME = "insar_los.nc"
@@ -242,64 +242,3 @@ def read_netcdf(path: str) -> dict[str, np.ndarray]:
     return out
 
 
-def insar_figure(run_dir: str) -> str | None:
-    """``insar_los.png``: the last output time's LOS displacement (mm) and velocity (mm/yr); None without a
-    raster."""
-    path = os.path.join(run_dir, NC_NAME)
-    if not os.path.exists(path):
-        return None
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from ..units import YEAR
-    from .observers import format_time
-    d = read_netcdf(path)
-    dx = d["x"][1] - d["x"][0] if len(d["x"]) > 1 else 1.0
-    dy = d["y"][1] - d["y"][0] if len(d["y"]) > 1 else 1.0
-    extent = (d["x"][0] - dx / 2, d["x"][-1] + dx / 2, d["y"][0] - dy / 2, d["y"][-1] + dy / 2)
-    panel = float(np.clip(4.5 * (extent[1] - extent[0]) / (extent[3] - extent[2]), 2.5, 8.0))    # map's aspect
-    fig, axes = plt.subplots(1, 2, figsize=(2 * panel + 3.0, 4.8), constrained_layout=True)
-    panels = ((d["los_displacement"][-1] * 1e3, "LOS displacement (mm)"),
-              (d["los_velocity"][-1] * 1e3 * YEAR, "LOS velocity (mm/yr, since the previous output)"))
-    for ax, (values, label) in zip(axes, panels):
-        lim = float(np.nanmax(np.abs(values))) if np.isfinite(values).any() else 1.0
-        im = ax.imshow(values, origin="lower", extent=extent, cmap="RdBu_r", vmin=-lim or -1, vmax=lim or 1)
-        fig.colorbar(im, ax=ax, label=label)
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_aspect("equal")
-    e, n, u = d["los"] if d["los"].ndim == 1 else d["los"].mean(axis=0)
-    which = "LOS" if d["los"].ndim == 1 else "mean LOS of the product's pixels"
-    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; {which} (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), "
-                 "positive towards the satellite")
-    out = os.path.join(run_dir, PNG_NAME)
-    fig.savefig(out + ".tmp", dpi=120, format="png")
-    plt.close(fig)
-    os.replace(out + ".tmp", out)
-    return out
-
-
-class InsarObserver(Observer):
-    """Observer of the time loop (pfault.run): the LOS raster at time 0 (or the times of the run a restart
-    continues) and at every output time of a converged step."""
-
-    def __init__(self, output: Any, raster: Raster | None, located: Located, los: np.ndarray,
-                 crs: Any = None) -> None:
-        m = output.model
-        self.output, self.comm = output, m.comm
-        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
-        georef = m.scene.georef
-        crs = crs if crs is not None else (georef.crs if georef is not None else None)
-        start = georef.start if georef is not None else None
-        self.series = InsarSeries(raster, los, crs, start) if m.comm.rank == 0 else None
-        self.started = False
-
-    def step_done(self, result: Any) -> None:
-        out = self.output
-        if not self.started:
-            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
-            self.started = True
-        if not (result.output and result.record.converged):
-            return
-        u = self.probe.values(result.u_rel)
-        run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))

@@ -44,6 +44,7 @@ RUN_FILES = frozenset([f"{s}.{e}" for s in SERIES for e in ("xdmf", "h5")]
                          # observations (pfault.io.stations, pfault.io.insar)
                          "station_displacement.csv", "station_displacement.h5", "insar_los.nc", "insar_los.png"])
 TMP_SUFFIX = ".tmp"
+OPTIONS = "options.txt"         # the resolved options: one "-name value" (or "-name") per line
 
 # what an XDMF file says of a dataset, (shape, dtype), and of a written step, (group path, time, its datasets)
 Description = tuple[tuple[int, ...], np.dtype]
@@ -109,6 +110,18 @@ def record_failure(directory: str, line: str, code: int, not_converged: bool = F
     if not_converged:
         summary["converged"] = False
     replace_json(path, summary, tmp=f"{path}.{os.getpid()}{TMP_SUFFIX}")
+
+
+def read_options(run_dir: str) -> dict[str, str]:
+    """The options of the run in ``run_dir`` as its options.txt holds them (RunWriter.write_metadata): {name without
+    '-': value string ('' for a flag)}."""
+    out = {}
+    with open(os.path.join(run_dir, OPTIONS)) as fh:
+        for line in fh:
+            if line.startswith("-"):
+                name, _, value = line[1:].rstrip("\n").partition(" ")
+                out[name] = value
+    return out
 
 
 def open_h5(path: str, mode: str) -> h5py.File:
@@ -360,7 +373,7 @@ class RunWriter:
         for k in sorted(options):
             v = options[k]
             lines.append(f"-{k} {v}" if v not in (None, "") else f"-{k}")
-        replace_text(self.file("options.txt"), "\n".join(lines) + "\n")
+        replace_text(self.file(OPTIONS), "\n".join(lines) + "\n")
         replace_json(self.file("versions.json"), package_versions())
         replace_json(self.file("materials.json"), {i: n for i, n in enumerate(self.material_names)})
 

@@ -25,9 +25,9 @@ import shutil
 
 import numpy as np
 
+from ..post.rundir import read_station_series
 from .calibration import Fit, Problem
 from .calibration_input import COMPONENTS, scene_files_absolute
-from .runs import read_station_series
 
 
 def write_all(out: str, problem: Problem, result: Fit, scene: str, wall: float) -> None:

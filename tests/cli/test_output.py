@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 
 from conftest import OEDOMETER, QUERETARO, REPO, WUXI, command, compare_runs, mpi_env, run_scene
-
 from pfault import hazard
+from pfault.io.output import RunWriter
+from pfault.post import rundir
 
 QRO = QUERETARO
 # -flow_ksp_rtol 1e-13: 2-rank flow solves are reproducible from run to run only to ~ksp_rtol; -ksp_atol 0: the
@@ -325,7 +326,6 @@ def test_new_run_replaces_an_old_result_only_after_its_first_step(tmp_path):
 
 def test_run_writer_stages_commits_and_abandons(tmp_path):
     """RunWriter alone: files go to a hidden sibling until commit; abandon removes it and nothing else."""
-    from pfault.io.output import RunWriter
     out = tmp_path / "out"
     out.mkdir()
     (out / "summary.json").write_text('{"old": true}')
@@ -389,8 +389,7 @@ def test_plain_run_writes_figures_and_the_fissure_hazard_map(tmp_path):
     for name in ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"):
         with open(run_dir / name, "rb") as fh:
             assert fh.read(8) == b"\x89PNG\r\n\x1a\n", name
-    from pfault.post import figures as fg
-    surf = fg.read_surface(str(run_dir))
+    surf = rundir.read_surface(str(run_dir))
     strain, tilt = surf.cell_data["horizontal_strain"], surf.cell_data["angular_distortion"]
     i = int(np.argmax(strain))
     x = surf.points[surf.cells[i], 0]

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 from conftest import OEDOMETER, TWO_BLOCKS, compare_runs, read_last_step, run_scene, write_flow_box
-
 from pfault.materials.field_files import read_field
 
 SITE = "config/site_example/site.opts"
