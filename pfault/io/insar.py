@@ -26,12 +26,14 @@ from typing import Any
 
 import numpy as np
 
+from .. import __version__
 from ..errors import InputError
+from ..georef import cf_time_units
+from ..paths import beside_scene
 from .probes import Raster
 from .rasters import add_grid_mapping
 
 NC_NAME = "insar_los.nc"
-PNG_NAME = "insar_los.png"
 FILL = -9999.0          # _FillValue of the pixels outside the land surface
 # |los| within this of 1 is a unit vector whose direction cosines were rounded (to two decimals they are up to ~0.009
 # off) and is normalised; a length further off is not the cosines of a direction (angles, a scaled vector) and is
@@ -50,7 +52,6 @@ class InsarSettings:
 def read_insar_settings(reader: Any, scene_file: str = "") -> InsarSettings | None:
     """-pfault_insar_los, -pfault_insar_spacing and -pfault_insar_grid (every rank); None without a LOS vector
     or a product grid."""
-    from ..paths import beside_scene
     los = reader.get("pfault_insar_los")
     spacing = reader.get("pfault_insar_spacing")
     grid = beside_scene(reader.get("pfault_insar_grid"), scene_file)
@@ -158,15 +159,13 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int
     ``spatial_ref`` places x, y; with ``start`` (the scene's start date) the times are CF dates; a per-pixel LOS
     ``los`` ((k, 3), the pixels inside) is written as ``los_east``, ``los_north``, ``los_up``."""
     import h5netcdf
-    import pfault
-    from ..georef import cf_time_units
     disp = np.asarray(maps, dtype=np.float64)
     t = np.asarray(times, dtype=np.float64)
     tmp = path + ".tmp"
     with h5netcdf.File(tmp, "w") as nc:
         nc.attrs.update({
             "Conventions": "CF-1.8", "title": "line-of-sight displacement of the land surface",
-            "source": f"pfault {pfault.__version__}",
+            "source": f"pfault {__version__}",
             **({"los_unit_vector_enu": los.astype(np.float64)} if los.ndim == 1 else {}),
             "comment": "LOS = e ux + n uy + u uz of the displacement relative to the initial state, positive "
                        "towards the satellite (e, n, u: unit vector from the ground to the satellite); pixels "

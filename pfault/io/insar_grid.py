@@ -19,7 +19,9 @@ import numpy as np
 
 from ..checks import PIXEL_BYTES_RANK, PIXEL_BYTES_ROOT, available_memory
 from ..errors import InputError, OutOfMemory
+from ..georef import Transform
 from ..mesh.serial import TET_FACES
+from ..tools.insar_input import read_insar_product
 from .insar import UNIT_TOL, check_los
 from .probes import INSIDE_TOL, Located, Raster, ground_faces, mesh_to_site
 
@@ -89,8 +91,6 @@ def _pixel_los(product: Any, inside: np.ndarray, los: np.ndarray | None, path: s
 def locate_product_pixels(serial: Any, ground: str, path: str, origin: Sequence[float], scene_crs: Any,
                           los: np.ndarray | None, ranks_on_node: int = 1) -> tuple[tuple, Located]:
     """Rank 0: ((the product's Raster, the LOS per pixel inside or (3,), the product's CRS), Located)."""
-    from ..georef import Transform
-    from ..tools.insar_input import read_insar_product
     product = read_insar_product(path, with_values=False, option=OPTION)
     if (product.crs is None) != (scene_crs is None):
         which = ("the product has no CRS (no grid mapping, no EPSG attribute) but the scene has -pfault_crs: add the "

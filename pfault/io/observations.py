@@ -11,10 +11,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from mpi4py import MPI
+
 from ..errors import InputError, run_on_root
 from ..paths import beside_scene
 from .insar import InsarSeries, InsarSettings, read_insar_settings
 from .insar import check_continuation as insar_continue
+from .insar_grid import locate_product_pixels
 from .observers import Observer
 from .probes import Located, PointProbe, Raster, locate_pixels
 from .stations import StationSeries, Stations, locate_stations
@@ -59,12 +62,10 @@ class Observations:
             stations = share(locate_stations, settings.stations_file, model.serial, model.split,
                              model.scene.mesh_origin)
         if settings.insar is not None:
-            from mpi4py import MPI
             node = mpi.Split_type(MPI.COMM_TYPE_SHARED)     # the ranks of each node: rank 0 counts those of its own
             ranks_on_node = mpi.bcast(node.size if mpi.rank == 0 else None, root=0)
             node.Free()
             if settings.insar.grid:
-                from .insar_grid import locate_product_pixels
                 georef = model.scene.georef
                 pixels = share(locate_product_pixels, model.serial, model.settings.ground_surface,
                                settings.insar.grid, model.scene.mesh_origin, georef.crs if georef else None,

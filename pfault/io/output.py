@@ -27,12 +27,12 @@ import platform
 import shutil
 import subprocess
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import h5py
 import numpy as np
 
-if TYPE_CHECKING:
-    import h5py
+from .. import __version__
 
 # names pfault writes into a run directory: replaced by a new run; anything else there is carried over
 SERIES = ("fields", "fault", "surface")
@@ -52,12 +52,12 @@ XdmfEntry = tuple[str, float, list[tuple[str, str, Description]]]
 
 
 def package_versions() -> dict[str, str | None]:
-    from petsc4py import PETSc
+    # here, not at the top: the post-processing that reads run directories (pfault.post) starts no MPI nor PETSc
     import mpi4py
     import petsc4py
-    import pfault
+    from petsc4py import PETSc
     versions: dict[str, str | None] = {
-        "pfault": pfault.__version__, "python": platform.python_version(), "numpy": np.__version__,
+        "pfault": __version__, "python": platform.python_version(), "numpy": np.__version__,
         "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()), "petsc4py": petsc4py.__version__,
         "mpi4py": mpi4py.__version__}
     for name in ("meshio", "gmsh", "h5py"):
@@ -127,7 +127,6 @@ def read_options(run_dir: str) -> dict[str, str]:
 def open_h5(path: str, mode: str) -> h5py.File:
     """h5py File without HDF5's file lock, so that a viewer may read what has been flushed while a run
     writes (HDF5 >= 1.10.7; older versions lock)."""
-    import h5py
     try:
         return h5py.File(path, mode, locking=False)
     except (TypeError, ValueError):

@@ -465,9 +465,7 @@ def insar_figure(run_dir: str) -> str | None:
     path = os.path.join(run_dir, NC_NAME)
     if not os.path.exists(path):
         return None
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     d = read_netcdf(path)
     dx = d["x"][1] - d["x"][0] if len(d["x"]) > 1 else 1.0
     dy = d["y"][1] - d["y"][0] if len(d["y"]) > 1 else 1.0
