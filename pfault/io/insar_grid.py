@@ -1,5 +1,5 @@
 """The LOS raster on an InSAR product's own pixels: ``-pfault_insar_grid FILE`` (an OPERA DISP-S1 or MintPy time
-series, pfault.tools.insar_input), so that the model's line-of-sight displacement and the measured one share their
+series, pfault.io.insar_input), so that the model's line-of-sight displacement and the measured one share their
 pixels (a difference in QGIS, the calibration's residuals).
 
 Each pixel centre, in the product's CRS, is moved into the scene's (``-pfault_crs``, pyproj) and located on the land
@@ -21,8 +21,8 @@ from ..checks import PIXEL_BYTES_RANK, PIXEL_BYTES_ROOT, available_memory
 from ..errors import InputError, OutOfMemory
 from ..georef import Transform
 from ..mesh.serial import TET_FACES
-from ..tools.insar_input import read_insar_product
 from .insar import UNIT_TOL, check_los
+from .insar_input import read_insar_product
 from .probes import INSIDE_TOL, Located, Raster, ground_faces, mesh_to_site
 
 OPTION = "-pfault_insar_grid"

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.insar import read_netcdf
-from .insar_input import InsarProduct, read_insar_product
+from ..io.insar_input import InsarProduct, read_insar_product
 
 RUN_FILE = "insar_los.nc"
 

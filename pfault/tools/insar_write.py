@@ -1,4 +1,4 @@
-"""InSAR time series written from NumPy in the layouts pfault.tools.insar_input reads, for tests and examples (as
+"""InSAR time series written from NumPy in the layouts pfault.io.insar_input reads, for tests and examples (as
 pfault.tools.mf6_write is for MODFLOW files): OPERA DISP-S1's (NetCDF-4 through h5netcdf: ``displacement`` (time, y, x)
 north first, ``spatial_ref`` with the CRS and GDAL's GeoTransform, CF ``time`` and ``reference_time``, optional
 ``los_east``, ``los_north``) and MintPy's ``timeseries.h5`` (``timeseries``, ``date``, REF_DATE, EPSG, X_FIRST ...)."""
