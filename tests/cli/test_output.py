@@ -379,6 +379,21 @@ def test_hazard_fields_of_an_affine_displacement():
     assert np.allclose(f["angular_distortion"][ok], np.hypot(*A[2]), rtol=1e-9)
 
 
+def test_post_processing_commands_name_a_directory_without_a_run(tmp_path):
+    """python -m pfault.post.figures, and python -m pfault.io.figures (the command README gave before post-processing
+    had its own package), on a directory that holds no run: exit 1, one line naming it; python -m pfault.post.gis
+    on a path that is no directory: exit 2 and its usage line."""
+    for module in ("pfault.post.figures", "pfault.io.figures"):
+        proc = subprocess.run([sys.executable, "-m", module, str(tmp_path)], cwd=REPO, env=mpi_env(),
+                              capture_output=True, text=True, timeout=120)
+        assert (proc.returncode, proc.stdout) == (1, ""), module
+        assert proc.stderr == f"figures: {tmp_path}: no summary.json (not a pfault run directory)\n", module
+    proc = subprocess.run([sys.executable, "-m", "pfault.post.gis", str(tmp_path / "none")], cwd=REPO, env=mpi_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr == "usage: python -m pfault.post.gis RUN_DIR  (a run written with -pfault_crs)\n"
+
+
 def test_plain_run_writes_figures_and_the_fissure_hazard_map(tmp_path):
     """mpirun -n 2 python -m pfault config/wuxi.opts (coarse): the figures, and the land surface's largest
     tensile strain over the ridge crest, where the fissure opens (x = 1000 m): in a surface triangle that
