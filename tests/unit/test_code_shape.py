@@ -351,6 +351,39 @@ def test_no_import_cycle():
     assert cycles(module_imports()) == []
 
 
+def _started_on_import(root: Path) -> dict[str, set[str]]:
+    """{module: which of petsc4py and mpi4py it imports at its top level}."""
+    out = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+        names = set()
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                names.add((node.module or "").split(".")[0])
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = names & {"petsc4py", "mpi4py"}
+    return out
+
+
+def test_post_processing_starts_neither_petsc_nor_mpi():
+    """What pfault.post imports, all the way down, imports neither petsc4py nor mpi4py at its top: figures and GIS
+    layers are made from a run directory in any process, and no run-time module imports pfault.post but the run's
+    top (pfault.simulation) and the tools that start runs."""
+    graph, started = module_imports(), _started_on_import(PACKAGE)
+    seen, todo = set(), [m for m in graph if m.startswith("pfault.post")]
+    while todo:
+        m = todo.pop()
+        if m not in seen:
+            seen.add(m)
+            todo += graph[m]
+    assert {m: started[m] for m in seen if started[m]} == {}
+    users = {m for m, deps in graph.items() if not m.startswith("pfault.post") and any(d.startswith("pfault.post")
+                                                                                       for d in deps)}
+    assert users <= {"pfault.simulation", "pfault.scenarios", "pfault.io.figures.__main__"} | {
+        m for m in graph if m.startswith("pfault.tools")}, users
+
+
 def test_import_checkers(tmp_path):
     """The checkers on a made-up package: a cycle through a ``from . import`` and a relative import of a sibling's
     name, an import under TYPE_CHECKING that closes no cycle, an inner import of the package flagged, a deferred
