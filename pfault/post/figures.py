@@ -73,8 +73,6 @@ def wells_from_options(options: dict[str, str]) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------------
 # figures
 # ------------------------------------------------------------------------------------------------------
-
-
 def _binned(s, values, nbins, how):
     """Per-bin reduction ('max' or 'mean') of values over the along-strike coordinate s; NaN in empty bins."""
     edges = np.linspace(s.min(), s.max(), nbins + 1)
