@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         write_runs(out, problem)
 
     problem = Problem(args.scene, params, obs, os.path.join(out, "runs"), args.workers, args.ranks, args.timeout,
-                      log, insar)
+                      log, insar=insar)
     more = f" and {insar.count()} InSAR values on {insar.dates} dates" if insar is not None else ""
     print(f"{PROG}: {len(params)} parameters, {len(obs.value)} measured components at "
           f"{len(obs.stations)} stations{more}; runs in {out}/runs, {args.workers} at a time", flush=True)
