@@ -46,7 +46,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
 from frictional_crack_mesh import make_crack_mesh, read_pfault_slip, slip_errors  # noqa: E402
-from studies.run import read_summary, run_captured  # noqa: E402
+from pfault.post.rundir import read_summary  # noqa: E402
+from studies.run import run_captured  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "frictional_crack.opts")
 # the scene's values (config/frictional_crack.opts)

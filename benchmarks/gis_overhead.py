@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""What the GIS layers cost (pfault.io.gis, -pfault_crs): the Wuxi case at paper size on 2 ranks (config/wuxi.opts),
+"""What the GIS layers cost (pfault.post.gis, -pfault_crs): the Wuxi case at paper size on 2 ranks (config/wuxi.opts),
 run side by side without and with -pfault_crs (and -pfault_start_date, stations and a LOS raster in both), in
 alternation, figures off in both.
 

@@ -18,9 +18,9 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from pfault.io import head_files
-from pfault.io.mf6_write import write_dis_grb, write_heads
+from pfault.sources import head_files
 from pfault.sources.heads import HeadsSettings, build_heads_source
+from pfault.tools.mf6_write import write_dis_grb, write_heads
 
 NLAY, NROW, NCOL, CELL = 10, 250, 400, 50.0
 ANGROT, ORIGIN = 15.0, (3.0e5, 4.0e6)

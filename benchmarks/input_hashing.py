@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""What recording a run's data files costs: the SHA-256 of each (pfault.io.provenance.describe, as a run does on
+"""What recording a run's data files costs: the SHA-256 of each (pfault.provenance.describe, as a run does on
 rank 0 at start-up), for the example site's files and for the 1-million-cell MODFLOW head file of
 benchmarks/heads_read.py (88 MB at 11 saved times; written into runs/bench_heads/ if it is not there).
 
@@ -19,7 +19,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from pfault.io.provenance import describe  # noqa: E402
+from pfault.provenance import describe  # noqa: E402
 
 SITE = os.path.join(os.path.dirname(HERE), "config", "site_example")
 BIG = os.path.join("runs", "bench_heads")

@@ -30,7 +30,7 @@ import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
-from pfault.io import figures as fg  # noqa: E402
+from pfault.post import figures as fg  # noqa: E402
 from studies.run import command, mpi_env, run_logged  # noqa: E402
 
 YEAR = fg.YEAR

@@ -19,7 +19,8 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from pfault.io import figures as fg  # noqa: E402
+from pfault.post import rundir  # noqa: E402
+from pfault.post.rundir import read_summary  # noqa: E402
 
 FISSURE = "config/hard/fissure_box.opts"
 MESHES = {"h": ("16,8,10", 8.0e6 / math.sqrt(62.5)), "h/2": ("32,16,20", 8.0e6 / math.sqrt(15.625))}
@@ -34,8 +35,8 @@ def run(out, ranks, extra):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
-    f = fg.read_fault(out).cell_data
-    s = fg.read_summary(out)
+    f = rundir.read_fault(out).cell_data
+    s = read_summary(out)
     return np.column_stack([f["opening"], f["slip"]]), max(st["newton_its"] for st in s["steps"] if st["time_s"] > 0)
 
 

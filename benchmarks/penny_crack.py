@@ -24,7 +24,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
 from penny_mesh import crack_errors, make_penny_mesh  # noqa: E402
-from studies.run import read_summary, run_captured  # noqa: E402
+from pfault.post.rundir import read_summary  # noqa: E402
+from studies.run import run_captured  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "penny_crack.opts")
 

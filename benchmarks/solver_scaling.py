@@ -22,7 +22,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from studies.run import read_summary, run_captured  # noqa: E402
+from pfault.post.rundir import read_summary  # noqa: E402
+from studies.run import run_captured  # noqa: E402
 
 SCENE = "config/queretaro_calibrated.opts"
 MAXIMA = ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m")

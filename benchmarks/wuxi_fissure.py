@@ -22,14 +22,14 @@ import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
-from pfault.io import figures as fg  # noqa: E402
-from pfault.io import fissures  # noqa: E402
+from pfault.post import fissures, meshes, rundir  # noqa: E402
+from pfault.post.rundir import read_summary  # noqa: E402
+from pfault.units import YEAR  # noqa: E402
 from studies.run import run_logged  # noqa: E402
 
 SCENES = {"plain": "config/wuxi.opts", "fissure": "config/wuxi_fissure.opts"}
 MAX_WALL_RATIO = 1.5
 MAX_NEWTON = 15
-YEAR = fg.YEAR
 
 
 def run(name: str, args: argparse.Namespace) -> dict | None:
@@ -38,7 +38,7 @@ def run(name: str, args: argparse.Namespace) -> dict | None:
     cmd = ["-m", "pfault", SCENES[name], "-pfault_output_dir", out, "-pfault_mesh_size_factor",
            str(args.size_factor), "-pfault_figures", "true", *args.extra]
     log = run_logged(cmd, args.ranks, os.path.join(args.out, f"{name}.log"), args.timeout)
-    summary = fg.read_summary(out) if os.path.exists(os.path.join(out, "summary.json")) else None
+    summary = read_summary(out)
     print(f"{name}: {log.command}\n  exit {log.code}{' (timed out)' if log.timed_out else ''}, "
           f"{log.wall:.1f} s end to end, load {log.load:.2f}", flush=True)
     if log.code != 0 or summary is None:
@@ -49,12 +49,12 @@ def run(name: str, args: argparse.Namespace) -> dict | None:
     return {"dir": out, "wall_s": log.wall, "load": log.load, "solve_s": summary["wall_s"]["solve"],
             "newton_max": max(r["newton_its"] for r in steps), "newton_total": sum(r["newton_its"] for r in steps),
             "converged": bool(summary["converged"]), "max_opening_m": summary.get("max_fault_opening_m", 0.0),
-            "surface_opening_m": fg.surface_fault_jumps(fg.read_fields(out), fg.read_fault(out))[0],
+            "surface_opening_m": meshes.surface_fault_jumps(rundir.read_fields(out), rundir.read_fault(out))[0],
             "summary": summary}
 
 
 def history(run_dir: str) -> list[dict]:
-    """The fissure at every output time of a run (pfault.io.fissures.history): broken faces, depth, surface
+    """The fissure at every output time of a run (pfault.post.fissures.history): broken faces, depth, surface
     length, largest opening of a broken face."""
     last = fissures.read_breaks(run_dir)
     if last is None:

@@ -18,7 +18,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from pfault.errors import EXIT_INPUT, EXIT_USAGE
+from pfault.errors import EXIT_INPUT, EXIT_USAGE, Interrupted, StopSignal, as_pfault_error
 from pfault.optionsfile import (COMMAND_LINE, ArgumentError, Entry, _entry_or_include, is_option_name,
                                 petsc_arguments, read_options_file)
 
@@ -110,7 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
     wants_help = any(a in ("-help", "--help", "-h") for a in argv[1:])
     if wants_help and (len(argv) < 2 or is_option_name(argv[1])):
-        from pfault.options import help_text
+        from pfault.options import help_text      # imports PETSc: PETSc starts with no options here
         print(USAGE)
         print(help_text())
         return 0
@@ -128,12 +128,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         _say(f"pfault: error: PETSc could not start with the options of {scene} and the command line "
              f"({exc}; PETSc's message is above)")
         return EXIT_INPUT
-    from pfault import cli
-    return cli.main(scene, argv)
+    from pfault.cli import main as run_scene      # imports PETSc: after petsc4py.init
+    return run_scene(scene, argv)
 
 
 def _stop_signal(signum, frame):
-    from pfault.errors import StopSignal
     raise StopSignal(signal.Signals(signum).name)
 
 
@@ -146,7 +145,6 @@ def run(argv: Sequence[str] | None = None) -> int:
     try:
         return main(argv)
     except KeyboardInterrupt as exc:
-        from pfault.errors import Interrupted, as_pfault_error
         _say(as_pfault_error(exc).line())
         return Interrupted.exit_code
 

@@ -22,7 +22,15 @@ import shutil
 import sys
 import time
 
-from .errors import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_NOT_CONVERGED, EXIT_OK
+from .errors import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_NOT_CONVERGED, EXIT_OK, InputError
+from .georef import parse_date
+from .tools.calibration import ForwardRunFailed, Problem, fit
+from .tools.calibration_input import (CalibrationInputError, empty_observations, read_observations, read_parameters,
+                                      scene_facts)
+from .tools.calibration_report import write_all, write_runs
+from .tools.insar_fit import InsarSettings, InsarTerm, parse_reference
+from .tools.pest import write_pest
+from .units import parse_quantity
 
 PROG = "python -m pfault.calibrate"
 MARKER = ".pfault_calibration"      # a directory written by a calibration, which the next one may replace
@@ -69,8 +77,6 @@ def _check_output(out: str) -> str | None:
 
 
 def _inputs(args):
-    from .tools.calibration_input import (CalibrationInputError, empty_observations, read_observations,
-                                          read_parameters, scene_facts)
     if not args.observations and not args.insar:
         raise CalibrationInputError("give --observations (station series) or --insar (an InSAR time series), or both")
     facts = scene_facts(args.scene, need_stations=bool(args.observations))
@@ -82,11 +88,6 @@ def _inputs(args):
 
 def _insar(args, facts):
     """The InSAR observations (pfault.tools.insar_fit), every InputError as a CalibrationInputError."""
-    from .errors import InputError
-    from .georef import parse_date
-    from .tools.calibration_input import CalibrationInputError
-    from .tools.insar_fit import InsarSettings, InsarTerm, parse_reference
-    from .units import parse_quantity
     try:
         if not facts.start_date:
             raise InputError(f"--insar {args.insar}: the scene {args.scene} has no -pfault_start_date, so the "
@@ -104,9 +105,6 @@ def _insar(args, facts):
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
-    from .tools.calibration import ForwardRunFailed, Problem, fit
-    from .tools.calibration_input import CalibrationInputError
-    from .tools.calibration_report import write_all, write_runs
     if args.workers < 1 or args.ranks < 1:
         return _fail("--workers and --ranks must be at least 1", EXIT_INPUT)
     try:
@@ -137,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         write_runs(out, problem)
 
     problem = Problem(args.scene, params, obs, os.path.join(out, "runs"), args.workers, args.ranks, args.timeout,
-                      log, insar)
+                      log, insar=insar)
     more = f" and {insar.count()} InSAR values on {insar.dates} dates" if insar is not None else ""
     print(f"{PROG}: {len(params)} parameters, {len(obs.value)} measured components at "
           f"{len(obs.stations)} stations{more}; runs in {out}/runs, {args.workers} at a time", flush=True)
@@ -159,7 +157,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _write_pest(args, params, obs):
-    from .tools.pest import write_pest
     if os.path.isdir(args.pest) and os.listdir(args.pest):
         return _fail(f"--pest {args.pest} is not empty; give a new or empty directory", EXIT_INPUT)
     os.makedirs(args.pest, exist_ok=True)

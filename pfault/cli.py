@@ -27,6 +27,9 @@ from petsc4py import PETSc
 from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_MEMORY, EXIT_NOT_CONVERGED,  # noqa: F401
                      EXIT_OK, EXIT_OUTPUT, EXIT_USAGE, RunGuard, StepNotConverged, as_pfault_error,
                      run_on_root)
+from .options import help_text
+from .simulation import Simulation
+from .solver.flow import FlowNotConverged
 
 
 def _flow_failure(exc):
@@ -49,9 +52,6 @@ def _last_words(sim, line, code):
 def main(options_file: str, argv: list[str], simulation: type | None = None) -> int:
     """Run the scene ``options_file`` with the command line ``argv``; returns the exit code. ``simulation``: the
     class of the run (default pfault.simulation.Simulation; a test gives one whose observers inject faults)."""
-    from .options import help_text
-    from .solver.flow import FlowNotConverged
-    from .simulation import Simulation
     comm = PETSc.COMM_WORLD
     guard = RunGuard(comm)
     sim = None

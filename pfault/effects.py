@@ -15,6 +15,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from mpi4py import MPI
 from petsc4py import PETSc
 
 if TYPE_CHECKING:
@@ -139,7 +140,6 @@ class EffectCosts:
         self.at_setup = {k: event_times(v) for k, v in EVENTS.items()}
 
     def record(self, effects: Effects, n_steps: int) -> dict[str, dict[str, Any]]:
-        from mpi4py import MPI
         mpi = self.comm.tompi4py()
         out: dict[str, dict[str, Any]] = {}
         for k, names in EVENTS.items():

@@ -25,6 +25,8 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 EXIT_OK = 0
 EXIT_INPUT = 1
 EXIT_USAGE = 2
@@ -197,7 +199,6 @@ def run_on_all(comm: Any, func: Callable[..., Any], *args: Any, wait: float = SH
     A rank whose func raised waits at most ``wait`` seconds for the others to get here: when they do not
     (they are stuck in a collective call it left), it raises alone and ``RunGuard.settle`` aborts the job."""
     from mpi4py import MPI
-    import numpy as np
     mpicomm = _mpi(comm)
     result, packed, error = None, None, None
     try:

@@ -19,6 +19,8 @@ import signal
 import sys
 from typing import Any, Literal
 
+from mpi4py import MPI
+
 SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1)
 
 
@@ -62,6 +64,5 @@ class StopRequest:
     def agreed(self) -> str | None:
         """The name of the signal any rank received (the highest number if several), or None: the same on
         every rank (collective: call it on every rank at the same point of the time loop)."""
-        from mpi4py import MPI
         signum = self.mpi.allreduce(int(self.received or 0), op=MPI.MAX)
         return signal.Signals(signum).name if signum else None

@@ -16,14 +16,17 @@ from typing import Any
 import numpy as np
 from petsc4py import PETSc
 
-from . import checks, fields, properties, scene as scn
+from . import checks, fields, scene as scn
 from .assembly.elastic import ElasticAssembler
 from .effects import logged
 from .effects import decide as decide_effects
 from .errors import InputError, run_on_root, warn
+from .materials import properties
 from .mesh import distributed
 from .solver.equations import Equations, constrained_local
 from .solver.choice import AUTO, ITERATIVE_FROM_DOFS, solver_file_name
+from .solver.flow import FIXED_HEAD_BIT, GroundwaterFlow, fixed_head_vertices, read_flow_settings
+from .solver.setup import apply_solver_file, find_solver_file
 from .sources import FlowSource, TableSource, Unchanged
 from .faults.bubbles import CellBubbles
 from .faults.faces import FaultFaces
@@ -66,7 +69,7 @@ class Model:
     rank owns (pfault.fields.FaceRows), ``source`` the pore-pressure
     source, ``equations`` the discrete problem with its terms (a fault interface: ``equations.terms``),
     ``solver_file`` the solver options file applied (None: none); ``properties`` the materials' properties per
-    local cell (pfault.properties.CellProperties)."""
+    local cell (pfault.materials.properties.CellProperties)."""
     comm: Any
     scene: Scene
     serial: Any
@@ -128,7 +131,6 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     run_on_root(comm, checks.probe_output_dir, s.output_dir)
     solver_name = reader.get("pfault_solver")
     if solver_name and solver_name != AUTO:
-        from .solver.setup import find_solver_file
         find_solver_file(solver_name, options_file)         # a file that is not there: an error before meshing
     mesh_origin = read_mesh_origin(reader)
     georef = read_georef(reader, options_file)
@@ -147,7 +149,6 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
         _check_one_pressure_source(heads_settings, drawdown, reader.get("pfault_flow"))
     flow_settings = None
     if reader.get("pfault_flow"):
-        from .solver.flow import read_flow_settings
         if drawdown.active:
             raise InputError("-pfault_flow: the pore pressure comes from the flow model; remove the "
                              "per-material head_drawdown/pressure_change tables")
@@ -172,7 +173,7 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
 
 def _field_values(scene: Scene, serial: Any, options_file: str) -> tuple[dict, list]:
     """Rank 0: the material properties given as fields, on the serial cells ({option: values}; empty without
-    fields), and the notes on how their files were read (pfault.io.field_files.SpatialField.note)."""
+    fields), and the notes on how their files were read (pfault.materials.field_files.SpatialField.note)."""
     refs = properties.field_refs(scene.materials, scene.flow_settings)
     notes: list = []
     if not refs:
@@ -197,7 +198,6 @@ def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
     out = scn.boundary_arrays(serial, scene.boundaries, s.ground_surface)
     checks.check_held(serial.points, out[0], [b.name for b in scene.boundaries])
     if scene.flow_settings is not None:
-        from .solver.flow import FIXED_HEAD_BIT, fixed_head_vertices
         out[0][:] |= FIXED_HEAD_BIT * fixed_head_vertices(serial, scene.flow_settings.fixed_head_surfaces)
     split = topology = None
     fault_names = [f.name for f in scene.fault_settings]
@@ -230,7 +230,6 @@ def _given_source(scene: Scene, mesh: Any, props: Any, field_values: dict | None
             return build_heads_source(mesh.dm.getComm(), scene.heads_settings, centroids, scene.settings.time_end)
     if scene.flow_settings is None:
         return TableSource(scene.drawdown, mesh.cell_material)
-    from .solver.flow import FIXED_HEAD_BIT, GroundwaterFlow
     fs, s = scene.flow_settings, scene.settings
     k, ss = properties.flow_cell_properties(fs, props, mesh.cell_material, field_values, mesh.cell_serial,
                                             s.water_density, s.gravity)
@@ -249,7 +248,6 @@ def _dofmap(scene: Scene, mesh: Any) -> Any:
 def _apply_solver(scene: Scene, mesh: Any, options_file: str) -> str | None:
     """Apply the solver options file of -pfault_solver (pfault.solver.choice: ``auto`` takes the direct solver below
     a size, the iterative one above) where the scene and the command line are silent; returns its path."""
-    from .solver.setup import apply_solver_file
     # the unknowns this rank owns: the global section's (DMPlex caches it; the state's Vec is laid out from it)
     owned = mesh.dm.getGlobalSection().getConstrainedStorageSize()
     n_dofs = int(mesh.dm.getComm().tompi4py().allreduce(owned))

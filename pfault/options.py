@@ -13,6 +13,8 @@ from types import ModuleType
 from typing import Any
 
 from .errors import InputError, collective_check, exit_code_table
+from .materials.properties import FIELD_PREFIX, parse_field
+from .petsc_compat import options_left
 from .units import parse_list, parse_quantity, parse_table
 
 
@@ -345,8 +347,7 @@ class OptionReader:
         if kind in ("real", "quantity"):
             return parse_quantity(text, name, spec.unit)
         if kind == "property":
-            # a number, or field:FILE[,variable=NAME][,outside=error|nearest] (pfault.properties)
-            from .properties import FIELD_PREFIX, parse_field
+            # a number, or field:FILE[,variable=NAME][,outside=error|nearest] (pfault.materials.properties)
             if str(text).strip().startswith(FIELD_PREFIX):
                 return parse_field(str(text), name, spec.unit)
             return parse_quantity(text, name, spec.unit)
@@ -395,7 +396,6 @@ _PETSC_LATE_OPTIONS = {"log_view", "options_left", "help", "options_file", "log_
 
 def unused_petsc_options(PETSc: ModuleType) -> list[str]:
     """Names of options in the PETSc database that no object has read (as -options_left reports)."""
-    from .petsc_compat import options_left
     return sorted(x for x in options_left(PETSc) if x not in _PETSC_LATE_OPTIONS and not x.startswith("pfault_"))
 
 

@@ -82,7 +82,7 @@ class Solve:
 class StepRecord:
     """A completed step: its number, its solve, and what was measured after it: the land surface's largest
     subsidence and horizontal displacement (m), the land surface's hazard maxima (``hazard``: on output steps,
-    pfault.io.hazard), each term's measures (``terms``: one per term, each with ``as_json``: a fault term's is
+    pfault.hazard), each term's measures (``terms``: one per term, each with ``as_json``: a fault term's is
     pfault.faults.measures.FaultMeasures), the pore-pressure source's figures (``source``) and, on output steps,
     the margins to failure (``margins``: pfault.margins.MarginStep, or None). ``initial``: the geostatic initial
     state (step 0)."""

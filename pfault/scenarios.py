@@ -39,7 +39,8 @@ from dataclasses import dataclass
 from .errors import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_OUTPUT, EXIT_USAGE, InputError, OutputError
 from .options import spec_for
 from .optionsfile import ArgumentError, is_option_name, read_options_file
-from .tools.runs import Run, RunResult, read_summary, run_many
+from .post.rundir import read_summary
+from .tools.runs import Run, RunResult, run_many
 from .units import parse_list, parse_quantity, parse_table
 
 EXIT_PLAN_FAILED = 8

@@ -13,9 +13,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .checks import check_box_indices, check_box_memory
 from .errors import InputError
+from .faults.settings import ContactSettings, FaultSettings
+from .mesh.box import box_mesh, parse_planes
+from .mesh.geometry import queretaro_mesh, wuxi_mesh
+from .mesh.gmsh_io import read_msh
+from .mesh.serial import locate_faces
+from .options import SPECS, spec_for
 from .physics.loading import MaterialDrawdown, Table
-from .properties import FieldRef, is_field
+from .materials.properties import FieldRef, is_field
 from .units import UNITS, format_duration, quantity_unit
 
 if TYPE_CHECKING:
@@ -26,8 +33,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Material:
-    """A material's properties as its options give them: a number (SI), or a field (pfault.properties.FieldRef)
-    interpolated at the cells' centroids; the model turns them into per-cell arrays (pfault.properties)."""
+    """A material's properties as its options give them: a number (SI), or a field
+    (pfault.materials.properties.FieldRef) interpolated at the cells' centroids; the model turns them into per-cell
+    arrays (pfault.materials.properties)."""
     name: str
     young_modulus: float | FieldRef
     poisson_ratio: float | FieldRef
@@ -116,7 +124,6 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
     ``index_bytes``: size of PETSc's indices, which bounds the number of unknowns of a box."""
     if settings.mesh_file:
         path = settings.mesh_file
-        from .mesh.gmsh_io import read_msh
         return lambda: read_msh(path)
     if settings.mesh_generator == "box":
         size = reader.get("pfault_box_size")
@@ -130,9 +137,7 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
         if min(cells) < 1:
             raise InputError(f"-pfault_box_cells: need at least one cell per direction, got "
                              f"{','.join(str(c) for c in cells)}")
-        from .checks import check_box_indices, check_box_memory
         check_box_indices(cells, index_bytes)
-        from .mesh.box import box_mesh, parse_planes
         planes = parse_planes(reader.get("pfault_box_fault_planes"))
 
         def build_box():
@@ -143,7 +148,6 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_wuxi_{key}") for key in
                   ("ridge_x", "crest_depth", "bedrock_depth", "ridge_half_width", "interfaces")}
-        from .mesh.geometry import wuxi_mesh
         return lambda: wuxi_mesh(factor, **params)
     if settings.mesh_generator == "queretaro":
         factor = reader.get("pfault_mesh_size_factor")
@@ -153,7 +157,6 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
         if not reader.has("pfault_queretaro_wells") and reader.has("pfault_flow_wells"):
             # refine where the flow model pumps
             params["wells"] = reader.get("pfault_flow_wells")
-        from .mesh.geometry import queretaro_mesh
         return lambda: queretaro_mesh(factor, **params)
     raise InputError(f"-pfault_mesh_generator {settings.mesh_generator}: this generator is not available yet; "
                      "use box, wuxi or queretaro, or give -pfault_mesh_file")
@@ -220,7 +223,6 @@ def time_table_warnings(reader: OptionReader, settings: Settings) -> list[str]:
     step changes only where no step looks (its times in bare seconds under a run in years, the unit left out),
     and a run in bare seconds that ends before a table in years reaches its second time sees almost none of
     it (the unit left out of -pfault_time_end)."""
-    from .options import spec_for
     end_text = reader.raw("pfault_time_end") or ""
     out = []
     for name, pairs in sorted(reader.resolved.items()):
@@ -271,7 +273,6 @@ def check_no_fault_boundaries(reader: OptionReader, fault_names: Iterable[str]) 
     """A surface that is a fault has no boundary conditions: a fault is an interior surface (cells on both sides,
     split and held by contact), boundary conditions act on the outer boundary; options for both say the scene
     names the wrong surface in one of them."""
-    from .options import SPECS
     keys = [s.name[len("pfault_bc_<surface>_"):] for s in SPECS if s.name.startswith("pfault_bc_<surface>_")]
     for name in fault_names:
         given = [f"-pfault_bc_{name}_{k}" for k in keys if reader.has(f"pfault_bc_{name}_{k}")]
@@ -337,7 +338,6 @@ def boundary_arrays(serial: SerialMesh, bcs: Sequence[Boundary],
 
     A roller fixes the displacement component normal to its surface, which must be a coordinate plane.
     """
-    from .mesh.serial import locate_faces
     nv, nc = len(serial.points), len(serial.tets)
     mask = np.zeros(nv, dtype=np.int64)
     face_tag = np.full((nc, 4), -1, dtype=np.int64)
@@ -376,7 +376,6 @@ def boundary_arrays(serial: SerialMesh, bcs: Sequence[Boundary],
 
 
 def read_faults(reader: OptionReader, surface_names: Collection[str]) -> list[FaultSettings]:
-    from .faults.settings import FaultSettings
     names = reader.get("pfault_faults")
     faults = []
     for name in names:
@@ -410,7 +409,6 @@ def read_faults(reader: OptionReader, surface_names: Collection[str]) -> list[Fa
 
 
 def read_contact_options(reader: OptionReader) -> ContactSettings:
-    from .faults.settings import ContactSettings
     return ContactSettings(effective_stress=reader.get("pfault_contact_effective_stress"),
                            suction=reader.get("pfault_contact_suction"),
                            monitor=reader.get("pfault_contact_monitor"))

@@ -9,22 +9,24 @@ from typing import Any
 import numpy as np
 from petsc4py import PETSc
 
-from . import run as loop
+from . import provenance, run as loop
 from .effects import EffectCosts
 from .errors import InputError
-from .io import provenance
+from .io import checkpoint
 from .io.observations import Observations, read_observation_settings
-from .io.summary import RunSummary
 from .io.observers import (CheckpointObserver, FieldOutput, Observer, ProgressLine, RunOutput, SummaryObserver,
-                           format_time, progress_line)
+                           progress_line)
+from .io.summary import RunSummary
 from .model import Model, build_model
 from .options import OptionReader, check_unused_petsc_options
-from .io import checkpoint
 from .margins import Margins
+from .post.figures import write_run_figures
+from .post.gis import write_gis
 from .solver.policy import StepSolver
 from .sources import coverage
 from .state import State
 from .surface import LandSurface
+from .units import format_time
 
 
 class Simulation:
@@ -182,18 +184,21 @@ class Simulation:
 
     # ------------------------------------------------------------------------------------------
     def write_summary(self, summary: dict, total: float) -> None:
-        """The final summary.json, then the figures. Rank 0 only, under ``run_on_root`` (pfault.cli): the other
-        ranks wait for its verdict, so that none ends (with a non-zero exit code that makes mpirun kill the
-        others) while files are written, and a failure to write ends them all."""
+        """The final summary.json, then the figures and the GIS layers. Rank 0 only, under ``run_on_root``
+        (pfault.cli): the other ranks wait for its verdict, so that none ends (with a non-zero exit code that makes
+        mpirun kill the others) while files are written, and a failure to write ends them all."""
         self.wall["total"] = total
         self.wall["assembly"] = self.model.equations.assembly_wall
         summary["wall_s"] = dict(self.wall)
         if self.comm.rank == 0:
-            self.output.finish(summary, self.model.scene.figures)
-            if self.gis and self.output.writer is not None:
+            run_dir = self.output.finish(summary)
+            if run_dir is not None and self.model.scene.figures and not summary["interrupted"]:
                 t0 = time.perf_counter()
-                from .io.gis import write_gis
-                written = write_gis(self.output.writer.dir)
+                paths = write_run_figures(run_dir)
+                PETSc.Sys.Print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
+            if self.gis and run_dir is not None:
+                t0 = time.perf_counter()
+                written = write_gis(run_dir)
                 PETSc.Sys.Print(f"pfault: {len(written)} GIS files in gis/ in {time.perf_counter() - t0:.1f} s")
 
     def record_failure(self, line: str, code: int) -> None:

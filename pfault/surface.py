@@ -1,5 +1,5 @@
 """The land surface as a measured part of the run: its displacement gathered on rank 0 at output steps, the
-earth-fissure hazard fields of that displacement (pfault.io.hazard) and their maxima, which go into the step's
+earth-fissure hazard fields of that displacement (pfault.hazard) and their maxima, which go into the step's
 record; surface.h5 writes the same fields (pfault.io.steps)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from . import hazard
 from .errors import run_on_root
-from .io import hazard
 from .mesh.fault import copy_index, output_mesh
 
 
@@ -23,7 +23,7 @@ class SurfaceStep:
 
 class LandSurface:
     """The land surface of ``model`` (the triangles of -pfault_ground_surface on the output mesh, or those at its
-    top: pfault.io.hazard.land_surface; ``surface`` on rank 0, None when there is none) and the output-mesh rows of
+    top: pfault.hazard.land_surface; ``surface`` on rank 0, None when there is none) and the output-mesh rows of
     this rank's owned vertices and pieces on it. Collective."""
 
     def __init__(self, model: Any) -> None:

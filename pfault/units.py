@@ -123,6 +123,16 @@ def format_duration(t: float) -> str:
     raise AssertionError(t)
 
 
+def format_time(t: float) -> str:
+    """``t`` seconds in years, days or seconds, the number 8 characters wide (the progress line's time)."""
+    year = 365.25 * 86400.0
+    if t >= 0.01 * year:
+        return f"{t / year:8.4g} yr"
+    if t >= 86400.0:
+        return f"{t / 86400.0:8.4g} d"
+    return f"{t:8.4g} s"
+
+
 def parse_list(text: str, option: str = "value", unit: str | None = None) -> list[float]:
     """Comma-separated list of quantities."""
     items = [s for s in str(text).split(",") if s.strip()]

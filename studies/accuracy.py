@@ -56,7 +56,9 @@ from importlib import resources
 
 import numpy as np
 
-from .run import REPO, cpu_model, read_summary, run_logged
+from pfault.post.rundir import read_summary
+
+from .run import REPO, cpu_model, run_logged
 
 SCRIPTS = os.path.join(REPO, "tests", "scripts")
 LEVELS = (0.10, 0.05, 0.01)             # error levels of the "cheapest setting" table

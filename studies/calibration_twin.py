@@ -12,7 +12,8 @@ import sys
 
 import numpy as np
 
-from pfault.tools.runs import Run, read_station_series, run_pfault
+from pfault.post.rundir import read_station_series
+from pfault.tools.runs import Run, run_pfault
 
 from .run import REPO, mpi_env
 

@@ -11,7 +11,7 @@ reference machine has 2 cores), with stdout in ``runs/<run>/stdout.txt`` and the
 (command, exit code, end-to-end wall time including MPI start-up and imports, CPU time, load average
 during the run) in ``runs/<run>/casestudy.json``. ``<run>`` is the case name, suffixed ``-<tag>``,
 ``-<solver>`` for a solver other than mumps and ``-f<factor>`` for a mesh size factor other than 1. Then
-the figures of pfault.io.figures are written into each run directory and ``runs/README.md`` is
+the figures of pfault.post.figures are written into each run directory and ``runs/README.md`` is
 regenerated from every run directory found.
 
 The paper's figures are the ones quoted in its text (nothing digitised from its plots): where it gives a
@@ -27,7 +27,8 @@ import re
 import sys
 import time
 
-from pfault.io import figures as fg
+from pfault.post import figures, meshes, rundir
+from pfault.units import YEAR
 
 from .run import REPO, command, cpu_model, run_logged, shown
 
@@ -160,7 +161,7 @@ def collect(run_dir):
     converge); the nodal surface jumps and dip slips come from the last converged output."""
     if not os.path.exists(os.path.join(run_dir, "summary.json")):
         return None
-    summary = fg.read_summary(run_dir)
+    summary = rundir.read_summary(run_dir)
     rec = {}
     path = os.path.join(run_dir, "casestudy.json")
     if os.path.exists(path):
@@ -178,15 +179,15 @@ def collect(run_dir):
     for key in ("max_subsidence_m", "max_horizontal_displacement_m", "max_fault_opening_m", "max_fault_slip_m",
                 "max_drawdown_m"):
         out[key] = max([s.get(key, 0.0) for s in good], default=0.0)
-    out["last_time_yr"] = good[-1]["time_s"] / fg.YEAR if good else 0.0
-    if fg.has_fault(run_dir) and good:
-        every = int(fg.read_options(run_dir).get("pfault_output_every", "1") or 1)
+    out["last_time_yr"] = good[-1]["time_s"] / YEAR if good else 0.0
+    if rundir.has_fault(run_dir) and good:
+        every = int(rundir.read_options(run_dir).get("pfault_output_every", "1") or 1)
         step = -1 if summary.get("converged") else -2
         if every == 1 or summary.get("converged"):
-            fields, fault = fg.read_fields(run_dir, step), fg.read_fault(run_dir, step)
-            out["surface_opening_m"], out["surface_slip_m"] = fg.surface_fault_jumps(fields, fault)
-            normals, area, _ = fg.face_geometry(fault.points, fault.cells)
-            dip = fg.dip_slip(fault.cell_data["slip"], normals)
+            fields, fault = rundir.read_fields(run_dir, step), rundir.read_fault(run_dir, step)
+            out["surface_opening_m"], out["surface_slip_m"] = meshes.surface_fault_jumps(fields, fault)
+            normals, area, _ = meshes.face_geometry(fault.points, fault.cells)
+            dip = meshes.dip_slip(fault.cell_data["slip"], normals)
             out["dip_slip_min_m"], out["dip_slip_max_m"] = float(dip.min()), float(dip.max())
             out["open_fraction"] = float(area[fault.cell_data["state"] == OPEN].sum() / area.sum())
     return out
@@ -304,7 +305,7 @@ def steps_table(r):
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     first = 0 if steps and steps[0]["time_s"] == 0 else 1     # step 0 is the initial (geostatic) state
     for i, s in enumerate(steps, start=first):
-        row = (f"| {i} | {s['time_s'] / fg.YEAR:.3g} | {s.get('newton_its', 0)} | {s.get('ksp_its', 0)} | "
+        row = (f"| {i} | {s['time_s'] / YEAR:.3g} | {s.get('newton_its', 0)} | {s.get('ksp_its', 0)} | "
                f"{s.get('factorizations', '—')} | {max(s.get('substeps', 1), 1) - 1} | {s.get('stick', '—')}/{s.get('slip', '—')}/{s.get('open', '—')} | "
                f"{s.get('wall_s', 0.0):.1f} | {s.get('max_subsidence_m', 0.0):.3g} | "
                f"{100.0 * s.get('max_fault_opening_m', 0.0):.3g} | {100.0 * s.get('max_fault_slip_m', 0.0):.3g} |")
@@ -535,7 +536,7 @@ def convergence_text(results):
         st = [s for s in r["summary"]["steps"] if not s.get("converged", True)]
         reason = st[0].get("reason") if st else "?"
         out += [f"- `{os.path.basename(r['dir'])}` did not converge at step {r['steps_done'] + 1} "
-                f"(t = {r['last_time_yr'] + (r['summary']['steps'][1]['time_s'] / fg.YEAR if len(r['summary']['steps']) > 1 else 0):.3g} "
+                f"(t = {r['last_time_yr'] + (r['summary']['steps'][1]['time_s'] / YEAR if len(r['summary']['steps']) > 1 else 0):.3g} "
                 f"years; reason: {reason}); `{r['driver'].get('command', '?')}`; last lines of its monitor output:",
                 "", "```", *r["tail"], "```", ""]
     return "\n".join(out)
@@ -738,7 +739,7 @@ def write_readme(results, path, regenerate_cmd):
                      f"{r['driver'].get('exit_code', '?')})"]
         text += ["", results_table(runs, case), ""]
         for r in runs:
-            figs = [f for f in fg.FIGURES if os.path.exists(os.path.join(r["dir"], f))]
+            figs = [f for f in figures.FIGURES if os.path.exists(os.path.join(r["dir"], f))]
             text += [f"Figures of `{os.path.basename(r['dir'])}` (in `{r['dir']}/`, not committed): "
                      + ", ".join(f"`{f}`" for f in figs) + ".", ""]
             text += [f"<details><summary>{os.path.basename(r['dir'])}: per step Newton/Krylov iterations, "
@@ -808,7 +809,7 @@ def main(argv=None):
                            tag=args.tag)
             status = status or (rec["exit_code"] != 0)
         if os.path.exists(os.path.join(run_dir, "summary.json")):
-            for p in fg.make_figures(run_dir):
+            for p in figures.make_figures(run_dir):
                 print(f"case studies: wrote {p}", flush=True)
     if not args.no_readme:
         path = write_readme(all_results(args.runs_dir), os.path.join(args.runs_dir, "README.md"),

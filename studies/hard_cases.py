@@ -37,7 +37,11 @@ from typing import Callable
 
 import numpy as np
 
-from .run import REPO, command, cpu_model, read_summary, run_logged, shown
+from pfault.post import rundir
+from pfault.post.rundir import read_summary
+from pfault.units import YEAR
+
+from .run import REPO, command, cpu_model, run_logged, shown
 
 RUNS_DIR = os.path.join("runs", "hard_cases")
 EXIT_OK, EXIT_FAILED = 0, 1
@@ -121,8 +125,7 @@ class RunResult:
                 and all(s["converged"] for s in self.steps))
 
     def fault(self, step=-1):
-        from pfault.io import figures as fg
-        return fg.read_fault(self.dir, step)
+        return rundir.read_fault(self.dir, step)
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -210,13 +213,11 @@ def path_independence(ref, tol=1e-6):
 def reopening(t_open, t_closed, t_reopen, tol=0.05, closed_share=0.2):
     """Load cycle (times in years): the fissure open at t_open closes at t_closed (at most ``closed_share`` of the
     open faces stay open) and reopens at t_reopen to the opening field of t_open (relative difference)."""
-    from pfault.io import figures as fg
-
     def evaluate(res, runs):
         snaps = {}
         for k in range(res.fault().num_steps):
             snap = res.fault(k)
-            snaps[round(snap.time / fg.YEAR, 6)] = snap.cell_data
+            snaps[round(snap.time / YEAR, 6)] = snap.cell_data
         a, b, c = (snaps.get(float(t)) for t in (t_open, t_closed, t_reopen))
         if a is None or b is None or c is None:
             return Verdict(None, False, "output times missing")

@@ -16,8 +16,8 @@ import sys
 import numpy as np
 from pyproj import CRS
 
-from pfault.io.insar_write import write_opera
 from pfault.tools.insar_fit import _at
+from pfault.tools.insar_write import write_opera
 from pfault.tools.runs import Run, run_pfault
 
 from .run import REPO, mpi_env

@@ -5,7 +5,6 @@ logged to a file with its wall time, CPU time and load average, stopped at a tim
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import platform
 import resource
@@ -117,15 +116,6 @@ def _kill(proc):
     with contextlib.suppress(ProcessLookupError):
         os.killpg(proc.pid, signal.SIGKILL)
     return proc.wait()
-
-
-def read_summary(out):
-    """summary.json of a run directory (None if the run wrote none)."""
-    path = os.path.join(str(out), "summary.json")
-    if not os.path.exists(path):
-        return None
-    with open(path) as fh:
-        return json.load(fh)
 
 
 def cpu_model():

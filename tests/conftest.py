@@ -13,7 +13,8 @@ import pytest
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
-from studies.run import command, read_summary, run_captured  # noqa: E402,F401  (command: tests that start runs)
+from pfault.post.rundir import read_fields, read_summary  # noqa: E402
+from studies.run import command, run_captured  # noqa: E402,F401  (command: tests that start runs)
 from studies.run import mpi_env as study_mpi_env  # noqa: E402
 
 PY = sys.executable
@@ -88,12 +89,10 @@ def run_script(script, ranks=1, args=()):
 
 
 def read_last_step(outdir):
-    import meshio
-    reader = meshio.xdmf.TimeSeriesReader(os.path.join(str(outdir), "fields.xdmf"))
-    points, _ = reader.read_points_cells()
-    for k in range(reader.num_steps):
-        t, point_data, cell_data = reader.read_data(k)
-    return points, t, point_data, cell_data
+    """(points, time, point data, cell data as meshio gives it: a list of one array per name) of fields.xdmf's last
+    output time (pfault.post.rundir.read_fields)."""
+    snap = read_fields(str(outdir))
+    return snap.points, snap.time, snap.point_data, {k: [v] for k, v in snap.cell_data.items()}
 
 
 @pytest.fixture
@@ -173,10 +172,7 @@ def compare_runs(ref_dir, other_dir, rtol):
                     diff = float(np.max(np.abs(x - y), initial=0.0)) / scale
                     assert diff <= rtol, f"{name}.h5 step {step} {key}: relative difference {diff:.3g}"
                     worst = max(worst, diff)
-    with open(os.path.join(ref_dir, "summary.json")) as fh:
-        sa = json.load(fh)
-    with open(os.path.join(other_dir, "summary.json")) as fh:
-        sb = json.load(fh)
+    sa, sb = read_summary(ref_dir), read_summary(other_dir)
     jump = max(sa.get("max_fault_opening_m", 0.0), sa.get("max_fault_slip_m", 0.0))
     for key in MAXIMA:
         floor = rtol * jump if key == "max_fault_opening_m" else 0.0     # (round-off where no face opens)

@@ -1,8 +1,8 @@
 """Writes the MODFLOW 6 files of the example site from NumPy: the binary grid and head files (site.dis.grb, site.hds)
 and the same heads as MODFLOW 6's NetCDF output (site.nc: a UGRID layered mesh with its CRS).
 
-MODFLOW 6 itself is not needed: pfault.io.mf6_write writes the binary grid and head files in the layouts of the
-MODFLOW 6 input/output guide, and flopy reads them as it reads MODFLOW's own; pfault.io.mf6_netcdf_write writes the
+MODFLOW 6 itself is not needed: pfault.tools.mf6_write writes the binary grid and head files in the layouts of the
+MODFLOW 6 input/output guide, and flopy reads them as it reads MODFLOW's own; pfault.tools.mf6_netcdf_write writes the
 NetCDF file with xarray as MODFLOW 6's NETCDF_MESH2D output does. The model:
 
 - DIS grid of 30 columns x 20 rows of 100 m, rotated 20 degrees counter-clockwise about its lower-left corner,
@@ -26,8 +26,8 @@ import numpy as np
 
 from pyproj import CRS, Transformer
 
-from pfault.io.mf6_netcdf_write import mesh
-from pfault.io.mf6_write import write_dis_grb, write_heads
+from pfault.tools.mf6_netcdf_write import mesh
+from pfault.tools.mf6_write import write_dis_grb, write_heads
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 NCOL, NROW, CELL = 30, 20, 100.0

@@ -14,7 +14,7 @@ from ..physics import elasticity as el
 if TYPE_CHECKING:
     from ..fields import DofMap
     from ..mesh.distributed import LocalMesh
-    from ..properties import CellProperties
+    from ..materials.properties import CellProperties
 
 CHUNK = 4096     # cells per kernel batch: element matrices of a batch stay in cache
 

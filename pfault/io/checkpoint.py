@@ -43,7 +43,7 @@ Contents (datasets; attributes on the root)
 - ``steps``: the run's step records up to the checkpoint's step (JSON as bytes), those of summary.json: a run
   killed between its checkpoint and its summary continues from the checkpoint with its records
 - ``input_files``: the data files the run read, each with its size and SHA-256 (JSON as bytes,
-  pfault.io.provenance), which a restart compares with its own; absent from checkpoints of earlier versions of
+  pfault.provenance), which a restart compares with its own; absent from checkpoints of earlier versions of
   format 6 and before (their files are not checked)
 - attributes ``format``, ``step``, ``time_s``, ``scene``, ``ranks``, ``nodes``, ``cells``, ``fault_faces``,
   ``dofs``, ``fields``, ``geostatic``, ``flow``

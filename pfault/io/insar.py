@@ -12,8 +12,9 @@ its triangle lies; pixels whose centre is outside the land surface are no-data.
 ``insar_los.nc`` (CF-1.8 NetCDF-4, readable by GDAL/QGIS, xarray and the netCDF library): coordinates ``x``,
 ``y`` (m, site coordinates) and ``time`` (s from the start of the scene), variables ``los_displacement`` (m) and
 ``los_velocity`` (m s-1; no-data at the first time) on (time, y, x), with _FillValue at pixels outside the land
-surface, and ``step`` (the step number of each time). The figure ``insar_los.png`` maps the last time's LOS
-displacement and velocity. A restart keeps the times of the run it continues up to its checkpoint's step.
+surface, and ``step`` (the step number of each time). The figure ``insar_los.png`` (pfault.post.figures) maps the
+last time's LOS displacement and velocity; the observer is pfault.io.observations.InsarObserver. A restart keeps the
+times of the run it continues up to its checkpoint's step.
 """
 
 from __future__ import annotations
@@ -25,12 +26,14 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, run_on_root
-from .observers import Observer
-from .probes import Located, PointProbe, Raster
+from .. import __version__
+from ..errors import InputError
+from ..georef import cf_time_units
+from ..paths import beside_scene
+from .probes import Raster
+from .rasters import add_grid_mapping
 
 NC_NAME = "insar_los.nc"
-PNG_NAME = "insar_los.png"
 FILL = -9999.0          # _FillValue of the pixels outside the land surface
 # |los| within this of 1 is a unit vector whose direction cosines were rounded (to two decimals they are up to ~0.009
 # off) and is normalised; a length further off is not the cosines of a direction (angles, a scaled vector) and is
@@ -49,7 +52,6 @@ class InsarSettings:
 def read_insar_settings(reader: Any, scene_file: str = "") -> InsarSettings | None:
     """-pfault_insar_los, -pfault_insar_spacing and -pfault_insar_grid (every rank); None without a LOS vector
     or a product grid."""
-    from ..paths import beside_scene
     los = reader.get("pfault_insar_los")
     spacing = reader.get("pfault_insar_spacing")
     grid = beside_scene(reader.get("pfault_insar_grid"), scene_file)
@@ -157,15 +159,13 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int
     ``spatial_ref`` places x, y; with ``start`` (the scene's start date) the times are CF dates; a per-pixel LOS
     ``los`` ((k, 3), the pixels inside) is written as ``los_east``, ``los_north``, ``los_up``."""
     import h5netcdf
-    import pfault
-    from ..georef import cf_time_units
     disp = np.asarray(maps, dtype=np.float64)
     t = np.asarray(times, dtype=np.float64)
     tmp = path + ".tmp"
     with h5netcdf.File(tmp, "w") as nc:
         nc.attrs.update({
             "Conventions": "CF-1.8", "title": "line-of-sight displacement of the land surface",
-            "source": f"pfault {pfault.__version__}",
+            "source": f"pfault {__version__}",
             **({"los_unit_vector_enu": los.astype(np.float64)} if los.ndim == 1 else {}),
             "comment": "LOS = e ux + n uy + u uz of the displacement relative to the initial state, positive "
                        "towards the satellite (e, n, u: unit vector from the ground to the satellite); pixels "
@@ -201,7 +201,6 @@ def write_netcdf(path: str, raster: Raster, los: np.ndarray, steps: Sequence[int
 def _write_georef(nc: Any, raster: Raster, los: np.ndarray, crs: Any) -> None:
     """The grid mapping of ``crs`` (and the data variables' ``grid_mapping``), and a per-pixel LOS."""
     if crs is not None:
-        from .gis import add_grid_mapping
         add_grid_mapping(nc, crs)
         for name in ("los_displacement", "los_velocity"):
             nc.variables[name].attrs["grid_mapping"] = "spatial_ref"
@@ -242,64 +241,3 @@ def read_netcdf(path: str) -> dict[str, np.ndarray]:
     return out
 
 
-def insar_figure(run_dir: str) -> str | None:
-    """``insar_los.png``: the last output time's LOS displacement (mm) and velocity (mm/yr); None without a
-    raster."""
-    path = os.path.join(run_dir, NC_NAME)
-    if not os.path.exists(path):
-        return None
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from ..units import YEAR
-    from .observers import format_time
-    d = read_netcdf(path)
-    dx = d["x"][1] - d["x"][0] if len(d["x"]) > 1 else 1.0
-    dy = d["y"][1] - d["y"][0] if len(d["y"]) > 1 else 1.0
-    extent = (d["x"][0] - dx / 2, d["x"][-1] + dx / 2, d["y"][0] - dy / 2, d["y"][-1] + dy / 2)
-    panel = float(np.clip(4.5 * (extent[1] - extent[0]) / (extent[3] - extent[2]), 2.5, 8.0))    # map's aspect
-    fig, axes = plt.subplots(1, 2, figsize=(2 * panel + 3.0, 4.8), constrained_layout=True)
-    panels = ((d["los_displacement"][-1] * 1e3, "LOS displacement (mm)"),
-              (d["los_velocity"][-1] * 1e3 * YEAR, "LOS velocity (mm/yr, since the previous output)"))
-    for ax, (values, label) in zip(axes, panels):
-        lim = float(np.nanmax(np.abs(values))) if np.isfinite(values).any() else 1.0
-        im = ax.imshow(values, origin="lower", extent=extent, cmap="RdBu_r", vmin=-lim or -1, vmax=lim or 1)
-        fig.colorbar(im, ax=ax, label=label)
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_aspect("equal")
-    e, n, u = d["los"] if d["los"].ndim == 1 else d["los"].mean(axis=0)
-    which = "LOS" if d["los"].ndim == 1 else "mean LOS of the product's pixels"
-    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; {which} (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), "
-                 "positive towards the satellite")
-    out = os.path.join(run_dir, PNG_NAME)
-    fig.savefig(out + ".tmp", dpi=120, format="png")
-    plt.close(fig)
-    os.replace(out + ".tmp", out)
-    return out
-
-
-class InsarObserver(Observer):
-    """Observer of the time loop (pfault.run): the LOS raster at time 0 (or the times of the run a restart
-    continues) and at every output time of a converged step."""
-
-    def __init__(self, output: Any, raster: Raster | None, located: Located, los: np.ndarray,
-                 crs: Any = None) -> None:
-        m = output.model
-        self.output, self.comm = output, m.comm
-        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
-        georef = m.scene.georef
-        crs = crs if crs is not None else (georef.crs if georef is not None else None)
-        start = georef.start if georef is not None else None
-        self.series = InsarSeries(raster, los, crs, start) if m.comm.rank == 0 else None
-        self.started = False
-
-    def step_done(self, result: Any) -> None:
-        out = self.output
-        if not self.started:
-            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
-            self.started = True
-        if not (result.output and result.record.converged):
-            return
-        u = self.probe.values(result.u_rel)
-        run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))

@@ -1,5 +1,5 @@
 """The LOS raster on an InSAR product's own pixels: ``-pfault_insar_grid FILE`` (an OPERA DISP-S1 or MintPy time
-series, pfault.tools.insar_input), so that the model's line-of-sight displacement and the measured one share their
+series, pfault.io.insar_input), so that the model's line-of-sight displacement and the measured one share their
 pixels (a difference in QGIS, the calibration's residuals).
 
 Each pixel centre, in the product's CRS, is moved into the scene's (``-pfault_crs``, pyproj) and located on the land
@@ -19,8 +19,10 @@ import numpy as np
 
 from ..checks import PIXEL_BYTES_RANK, PIXEL_BYTES_ROOT, available_memory
 from ..errors import InputError, OutOfMemory
+from ..georef import Transform
 from ..mesh.serial import TET_FACES
 from .insar import UNIT_TOL, check_los
+from .insar_input import read_insar_product
 from .probes import INSIDE_TOL, Located, Raster, ground_faces, mesh_to_site
 
 OPTION = "-pfault_insar_grid"
@@ -89,8 +91,6 @@ def _pixel_los(product: Any, inside: np.ndarray, los: np.ndarray | None, path: s
 def locate_product_pixels(serial: Any, ground: str, path: str, origin: Sequence[float], scene_crs: Any,
                           los: np.ndarray | None, ranks_on_node: int = 1) -> tuple[tuple, Located]:
     """Rank 0: ((the product's Raster, the LOS per pixel inside or (3,), the product's CRS), Located)."""
-    from ..georef import Transform
-    from ..tools.insar_input import read_insar_product
     product = read_insar_product(path, with_values=False, option=OPTION)
     if (product.crs is None) != (scene_crs is None):
         which = ("the product has no CRS (no grid mapping, no EPSG attribute) but the scene has -pfault_crs: add the "

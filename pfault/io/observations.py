@@ -1,5 +1,5 @@
 """Observations out in the form they are measured: station time series (pfault.io.stations) and InSAR
-line-of-sight rasters (pfault.io.insar), as observers of the time loop.
+line-of-sight rasters (pfault.io.insar), as observers of the time loop (``StationObserver``, ``InsarObserver``).
 
 ``read_observation_settings`` reads their options (every rank, before the scene's options are checked);
 ``Observations.locate`` places the stations and the pixels in the mesh once it is built (rank 0, then shared:
@@ -11,12 +11,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from mpi4py import MPI
+
 from ..errors import InputError, run_on_root
 from ..paths import beside_scene
-from .insar import InsarObserver, InsarSettings, read_insar_settings
+from .insar import InsarSeries, InsarSettings, read_insar_settings
 from .insar import check_continuation as insar_continue
-from .probes import locate_pixels
-from .stations import StationObserver, locate_stations
+from .insar_grid import locate_product_pixels
+from .observers import Observer
+from .probes import Located, PointProbe, Raster, locate_pixels
+from .stations import StationSeries, Stations, locate_stations
 from .stations import check_continuation as stations_continue
 
 
@@ -30,7 +34,7 @@ class ObservationSettings:
 def read_observation_settings(reader: Any, scene_file: str = "") -> ObservationSettings:
     """The observation options; a relative station file is taken from the working directory, else beside the
     scene file (pfault.paths.beside_scene)."""
-    spacing = reader.get("pfault_map_spacing")      # used by pfault.io.gis from options.txt
+    spacing = reader.get("pfault_map_spacing")      # used by pfault.post.gis from options.txt
     if spacing is not None and not spacing > 0:
         raise InputError(f"-pfault_map_spacing {spacing:g}: the pixel size must be positive (m), e.g. 50*m")
     return ObservationSettings(beside_scene(reader.get("pfault_stations"), scene_file),
@@ -58,12 +62,10 @@ class Observations:
             stations = share(locate_stations, settings.stations_file, model.serial, model.split,
                              model.scene.mesh_origin)
         if settings.insar is not None:
-            from mpi4py import MPI
             node = mpi.Split_type(MPI.COMM_TYPE_SHARED)     # the ranks of each node: rank 0 counts those of its own
             ranks_on_node = mpi.bcast(node.size if mpi.rank == 0 else None, root=0)
             node.Free()
             if settings.insar.grid:
-                from .insar_grid import locate_product_pixels
                 georef = model.scene.georef
                 pixels = share(locate_product_pixels, model.serial, model.settings.ground_surface,
                                settings.insar.grid, model.scene.mesh_origin, georef.crs if georef else None,
@@ -94,3 +96,51 @@ class Observations:
         elif self.pixels is not None:
             out.append(InsarObserver(output, *self.pixels, self.settings.insar.los))
         return out
+
+
+class StationObserver(Observer):
+    """Observer of the time loop (pfault.run): the stations' displacement at time 0 (or the rows of the run a
+    restart continues) and after every converged step."""
+
+    def __init__(self, output: Any, stations: Stations | None, located: Located) -> None:
+        m = output.model
+        self.output, self.comm = output, m.comm
+        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
+        self.series = StationSeries(stations, located.side) if m.comm.rank == 0 else None
+        self.started = False
+
+    def step_done(self, result: Any) -> None:
+        out = self.output
+        if not self.started:
+            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
+            self.started = True
+        if not result.record.converged:
+            return
+        u = self.probe.values(result.u_rel)
+        run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))
+
+
+class InsarObserver(Observer):
+    """Observer of the time loop (pfault.run): the LOS raster at time 0 (or the times of the run a restart
+    continues) and at every output time of a converged step."""
+
+    def __init__(self, output: Any, raster: Raster | None, located: Located, los: np.ndarray,
+                 crs: Any = None) -> None:
+        m = output.model
+        self.output, self.comm = output, m.comm
+        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
+        georef = m.scene.georef
+        crs = crs if crs is not None else (georef.crs if georef is not None else None)
+        start = georef.start if georef is not None else None
+        self.series = InsarSeries(raster, los, crs, start) if m.comm.rank == 0 else None
+        self.started = False
+
+    def step_done(self, result: Any) -> None:
+        out = self.output
+        if not self.started:
+            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
+            self.started = True
+        if not (result.output and result.record.converged):
+            return
+        u = self.probe.values(result.u_rel)
+        run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))

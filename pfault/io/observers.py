@@ -7,7 +7,6 @@ from __future__ import annotations
 import errno
 import json
 import shutil
-import time
 from typing import Any
 
 import numpy as np
@@ -17,20 +16,11 @@ from ..effects import logged
 from ..errors import EXIT_NOT_CONVERGED, InputError, OutputError, run_on_root
 from ..mesh.fault import output_mesh
 from ..run import per_side
+from ..units import format_time
 from . import checkpoint, parallel
-from .figures import write_run_figures
 from .output import RunWriter, record_failure
 from .steps import LocalStep, StepOutput
 from .summary import RunSummary
-
-
-def format_time(t: float) -> str:
-    year = 365.25 * 86400.0
-    if t >= 0.01 * year:
-        return f"{t / year:8.4g} yr"
-    if t >= 86400.0:
-        return f"{t / 86400.0:8.4g} d"
-    return f"{t:8.4g} s"
 
 
 def progress_line(step: int, rec: dict, candidates: tuple = ()) -> str:
@@ -201,17 +191,14 @@ class RunOutput:
         if self.fields is not None:
             self.fields.close()
 
-    def finish(self, summary: dict, figures: bool) -> None:
-        """Rank 0: the final summary.json, then the figures."""
+    def finish(self, summary: dict) -> str | None:
+        """Rank 0: the final summary.json; returns the run's directory (None when nothing was written)."""
         if self.writer is None:
-            return
+            return None
         self.writer.write_summary(summary)
         self.writer.commit()
         self.writer.close()
-        if figures and not summary["interrupted"]:
-            t0 = time.perf_counter()
-            paths = write_run_figures(self.writer.dir)
-            PETSc.Sys.Print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
+        return self.writer.dir
 
     def record_failure(self, line: str, code: int) -> None:
         """Rank 0, after every rank failed together: summary.json of a run in place says how it ended (best

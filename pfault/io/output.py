@@ -5,7 +5,7 @@ pfault.io.parallel).
 - ``fields.xdmf`` + ``fields.h5``: time series readable by ParaView and meshio.xdmf.TimeSeriesReader
 - ``fault.xdmf`` + ``fault.h5`` (faults), ``surface.xdmf`` + ``surface.h5`` (land surface, hazard fields)
 - ``options.txt``: the resolved options database; ``versions.json``: package versions and git hash;
-  ``input_files.json``: the data files the run read, with their sizes and SHA-256 (pfault.io.provenance)
+  ``input_files.json``: the data files the run read, with their sizes and SHA-256 (pfault.provenance)
 - ``summary.json``: scene, ranks, mesh sizes, per-step solver figures, maxima, wall times and each rank's
   peak memory
 - ``checkpoint.h5``: the state after the last completed step (pfault.io.checkpoint)
@@ -27,12 +27,12 @@ import platform
 import shutil
 import subprocess
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import h5py
 import numpy as np
 
-if TYPE_CHECKING:
-    import h5py
+from .. import __version__
 
 # names pfault writes into a run directory: replaced by a new run; anything else there is carried over
 SERIES = ("fields", "fault", "surface")
@@ -44,6 +44,7 @@ RUN_FILES = frozenset([f"{s}.{e}" for s in SERIES for e in ("xdmf", "h5")]
                          # observations (pfault.io.stations, pfault.io.insar)
                          "station_displacement.csv", "station_displacement.h5", "insar_los.nc", "insar_los.png"])
 TMP_SUFFIX = ".tmp"
+OPTIONS = "options.txt"         # the resolved options: one "-name value" (or "-name") per line
 
 # what an XDMF file says of a dataset, (shape, dtype), and of a written step, (group path, time, its datasets)
 Description = tuple[tuple[int, ...], np.dtype]
@@ -51,12 +52,12 @@ XdmfEntry = tuple[str, float, list[tuple[str, str, Description]]]
 
 
 def package_versions() -> dict[str, str | None]:
-    from petsc4py import PETSc
+    # here, not at the top: the post-processing that reads run directories (pfault.post) starts no MPI nor PETSc
     import mpi4py
     import petsc4py
-    import pfault
+    from petsc4py import PETSc
     versions: dict[str, str | None] = {
-        "pfault": pfault.__version__, "python": platform.python_version(), "numpy": np.__version__,
+        "pfault": __version__, "python": platform.python_version(), "numpy": np.__version__,
         "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()), "petsc4py": petsc4py.__version__,
         "mpi4py": mpi4py.__version__}
     for name in ("meshio", "gmsh", "h5py"):
@@ -111,10 +112,21 @@ def record_failure(directory: str, line: str, code: int, not_converged: bool = F
     replace_json(path, summary, tmp=f"{path}.{os.getpid()}{TMP_SUFFIX}")
 
 
+def read_options(run_dir: str) -> dict[str, str]:
+    """The options of the run in ``run_dir`` as its options.txt holds them (RunWriter.write_metadata): {name without
+    '-': value string ('' for a flag)}."""
+    out = {}
+    with open(os.path.join(run_dir, OPTIONS)) as fh:
+        for line in fh:
+            if line.startswith("-"):
+                name, _, value = line[1:].rstrip("\n").partition(" ")
+                out[name] = value
+    return out
+
+
 def open_h5(path: str, mode: str) -> h5py.File:
     """h5py File without HDF5's file lock, so that a viewer may read what has been flushed while a run
     writes (HDF5 >= 1.10.7; older versions lock)."""
-    import h5py
     try:
         return h5py.File(path, mode, locking=False)
     except (TypeError, ValueError):
@@ -360,7 +372,7 @@ class RunWriter:
         for k in sorted(options):
             v = options[k]
             lines.append(f"-{k} {v}" if v not in (None, "") else f"-{k}")
-        replace_text(self.file("options.txt"), "\n".join(lines) + "\n")
+        replace_text(self.file(OPTIONS), "\n".join(lines) + "\n")
         replace_json(self.file("versions.json"), package_versions())
         replace_json(self.file("materials.json"), {i: n for i, n in enumerate(self.material_names)})
 

@@ -28,12 +28,12 @@ from __future__ import annotations
 import os
 from typing import TYPE_CHECKING, Any
 
+import h5py
 import numpy as np
 
 from ..errors import PfaultError, run_on_all
 
 if TYPE_CHECKING:
-    import h5py
     import numpy.typing as npt
     from mpi4py import MPI
 
@@ -50,7 +50,6 @@ def available(comm: Any) -> bool:
     ok = mpi.size > 1 and not os.environ.get(GATHER_ENV)
     if ok:
         try:
-            import h5py
             ok = bool(h5py.get_config().mpi)
         except ImportError:
             ok = False
@@ -159,7 +158,6 @@ def blocks(comm: MPI.Comm, name: str, rows: dict[str, Rows]) -> dict[str, Block]
 def open_file(comm: MPI.Comm, path: str, mode: str) -> h5py.File:
     """``path`` opened by every rank of ``comm`` (mpi4py) with HDF5's MPI-IO driver, without HDF5's file lock
     where h5py offers that (pfault.io.output.open_h5). Collective."""
-    import h5py
     try:
         return h5py.File(path, mode, driver="mpio", comm=comm, locking=False)
     except TypeError:
@@ -169,7 +167,6 @@ def open_file(comm: MPI.Comm, path: str, mode: str) -> h5py.File:
 def create_dataset(group: h5py.Group, name: str, shape: tuple[int, ...], dtype: npt.DTypeLike) -> h5py.Dataset:
     """A dataset without fill values: every row is written (fill values would be written first, by all ranks
     together). Collective."""
-    import h5py
     dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
     dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)
     return group.create_dataset(name, shape=shape, dtype=dtype, dcpl=dcpl)

@@ -115,7 +115,7 @@ class Raster:
 
 def ground_faces(serial: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
     """(cell, local face) of the land surface's triangles in the serial mesh: those of the physical surface
-    ``name``, or the faces on the plane z = max z when the mesh has no such surface (pfault.io.hazard's rule)."""
+    ``name``, or the faces on the plane z = max z when the mesh has no such surface (pfault.hazard's rule)."""
     tri = serial.surfaces.get(name)
     if tri is not None and len(tri):
         t, cell, lface = locate_faces(serial.tets, len(serial.points), tri)

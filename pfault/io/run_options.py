@@ -14,13 +14,13 @@ No PETSc here: the options are {name: value string}, as in options.txt and PETSc
 
 from __future__ import annotations
 
-import os
 import re
 
 from ..errors import InputError
 from ..options import spec_for
 from ..physics.loading import Table
 from ..units import parse_table
+from .output import read_options
 
 
 # options a continued run may change: output, solver, time stepping, and the loading tables (LOADING) after
@@ -41,17 +41,6 @@ def _physical_options(options):
     return {k.lower(): ("" if v is None else str(v)) for k, v in options.items()
             if k.lower().startswith("pfault_") and not RESTART_MAY_CHANGE.match(k.lower())
             and not any(pattern.match(k.lower()) for pattern, *_ in LOADING)}
-
-
-def read_run_options(run_dir: str) -> dict[str, str]:
-    """The -pfault_* options of the run in ``run_dir`` (its options.txt), {name: value string}."""
-    out = {}
-    with open(os.path.join(run_dir, "options.txt")) as fh:
-        for line in fh:
-            if line.startswith("-"):
-                name, _, value = line[1:].rstrip("\n").partition(" ")
-                out[name] = value
-    return out
 
 
 def loading_tables(options: dict[str, str], water_density: float,
@@ -106,7 +95,7 @@ def check_options(run_dir: str, options: dict[str, str], until: float, water_den
     before ``until``, the checkpoint's time: a continued run equals the uninterrupted one only with the same
     model and the same load up to then. ``options``: this run's PETSc options."""
     try:
-        run_options = read_run_options(run_dir)
+        run_options = read_options(run_dir)
     except OSError:
         return      # a run directory without options.txt: the checkpoint's own checks stand
     theirs, mine = _physical_options(run_options), _physical_options(options)

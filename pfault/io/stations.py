@@ -29,11 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, run_on_root
+from ..errors import InputError
 from ..paths import file_problem
 from .output import open_h5, replace_text
-from .observers import Observer
-from .probes import SIDE_NAMES, Located, PointProbe, locate_points, mesh_to_site
+from .probes import SIDE_NAMES, Located, locate_points, mesh_to_site
 
 CSV_NAME = "station_displacement.csv"
 H5_NAME = "station_displacement.h5"
@@ -202,23 +201,3 @@ class StationSeries:
         os.replace(tmp, path)
 
 
-class StationObserver(Observer):
-    """Observer of the time loop (pfault.run): the stations' displacement at time 0 (or the rows of the run a
-    restart continues) and after every converged step."""
-
-    def __init__(self, output: Any, stations: Stations | None, located: Located) -> None:
-        m = output.model
-        self.output, self.comm = output, m.comm
-        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
-        self.series = StationSeries(stations, located.side) if m.comm.rank == 0 else None
-        self.started = False
-
-    def step_done(self, result: Any) -> None:
-        out = self.output
-        if not self.started:
-            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
-            self.started = True
-        if not result.record.converged:
-            return
-        u = self.probe.values(result.u_rel)
-        run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))

@@ -8,12 +8,13 @@ the effects' costs and the step records (those of the faults included).
 
 from __future__ import annotations
 
+import resource
 import sys
 from typing import Any
 
 import numpy as np
 
-from .hazard import summary_maxima
+from ..hazard import summary_maxima
 
 
 class RunSummary:
@@ -94,7 +95,6 @@ def partition(model: Any) -> dict:
 
 def memory_peak_mib(comm: Any) -> list:
     """The largest resident set size of each rank's process so far, in MiB (a list in rank order; collective)."""
-    import resource
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux, bytes on macOS
     mib = peak / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
     return [round(m, 1) for m in comm.tompi4py().allgather(mib)]

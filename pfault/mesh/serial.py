@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
+
 # local faces of a tetrahedron: face k is opposite vertex k
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
@@ -21,7 +23,6 @@ class SerialMesh:
 
     def check(self) -> SerialMesh:
         """The mesh itself, after checking it has tetrahedra and none is degenerate (InputError)."""
-        from ..errors import InputError
         if self.tets.size == 0:
             raise InputError(f"mesh {self.source}: no tetrahedra in any physical volume")
         vol = signed_volumes(self.points, self.tets)

@@ -40,6 +40,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..errors import InputError
+from ..materials.properties import is_field
 from ..physics import flow as fl
 from ..physics.loading import Table
 from .setup import set_default
@@ -79,7 +80,7 @@ def _as_well(w):
 
 @dataclass(frozen=True)
 class FlowSettings:
-    conductivity: tuple           # per material: m/s, or a field (pfault.properties.FieldRef)
+    conductivity: tuple           # per material: m/s, or a field (pfault.materials.properties.FieldRef)
     storage: tuple                # per material: 1/m, a field, or None: the default from the skeleton per cell
     wells: tuple
     fixed_head_surfaces: tuple
@@ -91,7 +92,6 @@ class FlowSettings:
 def read_flow_settings(reader: OptionReader, material_names: Sequence[str], materials: Sequence[Material],
                        surface_names: Collection[str], water_density: float, gravity: float) -> FlowSettings:
     """Flow inputs from -pfault_ options (call only when -pfault_flow is true); same verdict on every rank."""
-    from ..properties import is_field
     cond, stor, voids = [], [], []
     for name, m in zip(material_names, materials):
         p = f"pfault_material_{name}_"

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from petsc4py import PETSc
 
+from .. import optionsfile
 from ..errors import InputError
 
 if TYPE_CHECKING:
@@ -26,10 +27,9 @@ def set_default(name: str, value: str) -> None:
 def read_options_file(path: str) -> list[tuple[str, object]]:
     """(name, value) pairs of a PETSc options file, read strictly (pfault.optionsfile): a malformed solver file
     is an InputError naming the file and line."""
-    from ..optionsfile import ArgumentError, read_options_file as read
     try:
-        return [(e.name, e.value) for e in read(path)]
-    except ArgumentError as exc:
+        return [(e.name, e.value) for e in optionsfile.read_options_file(path)]
+    except optionsfile.ArgumentError as exc:
         raise InputError(str(exc)) from None
 
 

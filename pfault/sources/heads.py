@@ -1,5 +1,5 @@
 """Pore pressure from a site's groundwater model: heads saved at times by MODFLOW 6 (a binary head file and the
-model's binary grid file) or pressure changes / heads in pfault's generic HDF5 layout (pfault.io.head_files).
+model's binary grid file) or pressure changes / heads in pfault's generic HDF5 layout (pfault.sources.head_files).
 
 Each cell of the mesh takes the value at its centroid, in site coordinates (mesh coordinates plus
 -pfault_mesh_origin): the head of the MODFLOW cell that contains it, or the interpolant of the generic layout.
@@ -35,9 +35,11 @@ import numpy as np
 from mpi4py import MPI
 
 from ..errors import InputError, collective_check, run_on_all, warn
+from . import head_files
 from ..paths import beside_scene
 from ..units import UNITS, parse_quantity
 from . import zero_on
+from .netcdf_heads import is_mf6_netcdf, open_mf6_netcdf
 
 OUTSIDE_ERROR, OUTSIDE_ZERO = "error", "zero"
 DRY = -1e29             # MODFLOW 6 writes a dry cell's head as -1e30 (DHDRY): at or below this, dry
@@ -103,8 +105,6 @@ def read_heads_settings(reader: Any, water_density: float, gravity: float, origi
 
 def open_heads(settings: HeadsSettings) -> tuple[Any, Any]:
     """(the head file's reader, the MODFLOW grid or None); the reader's ``times`` in seconds as ``seconds``."""
-    from ..io import head_files
-    from .netcdf_heads import is_mf6_netcdf, open_mf6_netcdf
     if is_mf6_netcdf(settings.file):
         return open_mf6_netcdf(settings)
     if settings.grid:

@@ -20,7 +20,7 @@ DIS model written as a UGRID layered mesh) and ``modflow_model``. As MODFLOW 6 w
   (``EXPORT_ARRAY_NETCDF``; variables whose ``modflow_input`` ends in ``/TOP``, ``/BOTM``), else those of
   ``-pfault_heads_grid``.
 
-The reader gives what pfault.sources.heads takes of a MODFLOW model: an ``Mf6Grid`` (pfault.io.head_files) for the
+The reader gives what pfault.sources.heads takes of a MODFLOW model: an ``Mf6Grid`` (pfault.sources.head_files) for the
 lookup, wrapped in ``Reprojected`` when the CRSs differ, and ``times`` / ``values(i)`` (flat, layer by layer) like
 ``Mf6Heads``; anything that cannot be used is an InputError naming the file and the fix.
 """
@@ -30,10 +30,12 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+import h5py
 import numpy as np
 
 from ..errors import InputError
-from ..io.head_files import Mf6Grid, _unit_seconds
+from ..georef import Transform, crs_from_cf, same_crs
+from .head_files import Mf6Grid, _unit_seconds, read_mf6_grid, scaled
 
 FT = 0.3048
 LAYOUT = "MODFLOW 6's NetCDF output (NETCDF_STRUCTURED or NETCDF_MESH2D in the output control)"
@@ -41,7 +43,6 @@ LAYOUT = "MODFLOW 6's NetCDF output (NETCDF_STRUCTURED or NETCDF_MESH2D in the o
 
 def is_mf6_netcdf(path: str) -> bool:
     """Whether ``path`` is an HDF5-based NetCDF file with MODFLOW 6's ``modflow_grid`` global attribute."""
-    import h5py
     try:
         with h5py.File(path, "r") as f:
             return "modflow_grid" in f.attrs
@@ -62,7 +63,6 @@ class Mf6NetcdfHeads:
     unit of its heads), ``crs`` (pyproj or None), ``grid`` (Mf6Grid in the file's coordinates) and ``values(i)``."""
 
     def __init__(self, path: str, grb: Any = None) -> None:
-        import h5py
         self.path = path
         self.file = h5py.File(path, "r")
         f = self.file
@@ -176,7 +176,6 @@ class Mf6NetcdfHeads:
         return a
 
     def _crs(self) -> Any:
-        from ..georef import crs_from_cf
         var = self.file["head"] if "head" in self.file else self.layers[0]
         name = _text(var.attrs.get("grid_mapping", "")).strip()
         if not name:
@@ -246,7 +245,6 @@ class Reprojected:
     file's CRS first; ``extent`` (for messages) is the file's box moved into the scene's CRS."""
 
     def __init__(self, grid: Any, scene_crs: Any, file_crs: Any) -> None:
-        from ..georef import Transform
         self.grid = grid
         self.to_file, self.to_scene = Transform(scene_crs, file_crs), Transform(file_crs, scene_crs)
 
@@ -266,7 +264,6 @@ class Reprojected:
 def open_mf6_netcdf(settings: Any) -> tuple[Mf6NetcdfHeads, Any]:
     """(reader, grid to look points up in) of a MODFLOW 6 NetCDF head file under the heads settings: the time unit
     of the file (an -pfault_heads_time_unit that contradicts it is an error), its length unit, its CRS."""
-    from ..io.head_files import read_mf6_grid, scaled
     grb = read_mf6_grid(settings.grid) if settings.grid else None
     heads = Mf6NetcdfHeads(settings.file, grb)
     unit = heads.time_unit if heads.time_unit is not None else settings.time_unit
@@ -287,7 +284,6 @@ def open_mf6_netcdf(settings: Any) -> tuple[Mf6NetcdfHeads, Any]:
     elif length != 1.0:                             # coordinates in the CRS's unit: only the elevations scale
         grid = replace(grid, top=grid.top * length, botm=grid.botm * length)
     if heads.crs is not None and settings.crs is not None:
-        from ..georef import same_crs
         if not same_crs(heads.crs, settings.crs):
             grid = Reprojected(grid, settings.crs, heads.crs)
     return heads, grid

@@ -1,7 +1,7 @@
 """Weighted least squares of a scene's parameters against station observations (``python -m pfault.calibrate``).
 
 The objective is phi = sum_i ((s_i(p) - o_i) / sigma_i)^2 over every measured component, s_i the run's station
-displacement interpolated linearly in time to the observation's time (pfault.tools.runs.StationSeries.at).
+displacement interpolated linearly in time to the observation's time (pfault.post.rundir.StationSeries.at).
 It is minimised by scipy.optimize.least_squares with its dogleg method in a rectangular trust region
 (method "dogbox", which keeps the parameters within their bounds: on the twin experiment it took 4
 iterations where the trust-region reflective method took 10, whose scaling by the distance to the bounds
@@ -29,8 +29,9 @@ from typing import Any
 
 import numpy as np
 
+from ..post.rundir import read_station_series
 from .calibration_input import Observations, Parameter
-from .runs import Run, RunResult, read_station_series, run_many
+from .runs import Run, RunResult, run_many
 
 DERIVATIVE_STEP = 0.01      # forward-difference step in the fitted variables
 FTOL = 1e-4                 # relative reduction of phi below which the fit stops (PEST's PHIREDSTP is 0.01)

@@ -279,7 +279,7 @@ def station_names(path: str, scene: str) -> list[str]:
 
 
 FILE_OPTIONS = ("pfault_stations", "pfault_heads_file", "pfault_heads_grid")    # found beside the scene too
-FIELD = "field:"                                                                  # pfault.properties.FIELD_PREFIX
+FIELD = "field:"                                                        # pfault.materials.properties.FIELD_PREFIX
 
 
 def scene_files_absolute(scene: str) -> dict[str, str]:

@@ -25,9 +25,10 @@ import shutil
 
 import numpy as np
 
+from ..post.rundir import read_station_series
 from .calibration import Fit, Problem
 from .calibration_input import COMPONENTS, scene_files_absolute
-from .runs import read_station_series
+from .insar_report import write_insar_outputs
 
 
 def write_all(out: str, problem: Problem, result: Fit, scene: str, wall: float) -> None:
@@ -41,7 +42,6 @@ def write_all(out: str, problem: Problem, result: Fit, scene: str, wall: float) 
     if len(problem.observations.value):
         _figure(out, problem, fitted)
     if problem.insar is not None:
-        from .insar_report import write_insar_outputs
         write_insar_outputs(out, problem.insar, fitted)
     _summary(out, problem, result, scene, wall)
 

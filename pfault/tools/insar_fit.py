@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from .insar_input import InsarProduct, read_insar_product
+from ..io.insar import read_netcdf
+from ..io.insar_input import InsarProduct, read_insar_product
 
 RUN_FILE = "insar_los.nc"
 
@@ -96,7 +97,6 @@ class InsarTerm:
     def simulated(self, output_dir: str) -> np.ndarray:
         """(nt, ny, nx) the model's LOS at the product's dates relative to their reference dates (NaN off the land
         surface)."""
-        from ..io.insar import read_netcdf
         run = read_netcdf(os.path.join(output_dir, RUN_FILE))
         if run["los_displacement"].shape[1:] != self.product.values.shape[1:]:
             raise InputError(f"{output_dir}/{RUN_FILE}: not on the pixels of {self.product.path}")

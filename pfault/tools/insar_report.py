@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ..io.rasters import add_grid_mapping, write_geotiff
+
 
 def write_insar_outputs(out: str, term: Any, fitted_dir: str) -> list[str]:
     """The files above for the run in ``fitted_dir``."""
@@ -25,7 +27,6 @@ def write_insar_outputs(out: str, term: Any, fitted_dir: str) -> list[str]:
     model = observed + residual
     written = [_netcdf(os.path.join(out, "insar_fit.nc"), term, observed, model, residual)]
     if p.crs is not None:
-        from ..io.gis import write_geotiff
         written.append(write_geotiff(os.path.join(out, "insar_residual.tif"), p.x, p.y, residual[-1], p.crs,
                                      {"long_name": "model - observed LOS displacement", "units": "m",
                                       "date": p.dates[-1].isoformat()}))
@@ -43,7 +44,6 @@ def _netcdf(path: str, term: Any, observed: np.ndarray, model: np.ndarray, resid
         nc.dimensions = {"time": len(p.dates), "y": len(p.y), "x": len(p.x)}
         gm = {}
         if p.crs is not None:
-            from ..io.gis import add_grid_mapping
             add_grid_mapping(nc, p.crs)
             gm = {"grid_mapping": "spatial_ref"}
         for name, axis in (("x", p.x), ("y", p.y)):

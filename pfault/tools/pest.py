@@ -28,7 +28,9 @@ import sys
 
 import numpy as np
 
-from .calibration_input import COMPONENTS, Observations, Parameter
+from .calibration import Problem
+from .calibration_input import COMPONENTS, Observations, Parameter, read_parameters
+from .runs import Run, run_pfault
 
 FIELD = 24                   # characters of a template field: PEST writes the value into its width
 GROUP = "displacement"
@@ -98,9 +100,6 @@ def read_observation_table(path: str) -> Observations:
 def forward(scene: str, run_from: str) -> int:
     """PEST's model command: the scene with the values of parameters.txt run from run_from, its output in run/,
     simulated.txt written here."""
-    from .calibration import Problem
-    from .calibration_input import read_parameters
-    from .runs import Run, run_pfault
     here = os.getcwd()
     params = read_parameters(os.path.join(here, "parameters.csv"))
     with open(os.path.join(here, "parameters.txt")) as fh:

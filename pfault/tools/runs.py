@@ -1,5 +1,5 @@
-"""Running pfault on a scene with option overrides and reading what the run wrote, for the tools that run a
-scene many times (calibration, scenarios).
+"""Running pfault on a scene with option overrides, for the tools that run a scene many times (calibration,
+scenarios); what a run wrote is read with pfault.post.rundir.
 
 Each run is a separate ``python -m pfault SCENE -pfault_output_dir DIR [-option value ...]`` (``mpirun -n N``
 in front for N > 1 ranks) started from the working directory of the caller, so that the scene's relative
@@ -12,21 +12,16 @@ This module does not import PETSc.
 from __future__ import annotations
 
 import contextlib
-import csv
-import json
 import os
 import signal
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
-import numpy as np
-
-STATIONS_CSV = "station_displacement.csv"
 _LIVE: set = set()                 # runs under way (run_many stops them all when its caller is interrupted)
 _LIVE_LOCK = threading.Lock()
 ERROR_PREFIXES = ("pfault: error:", "pfault: internal error:")
@@ -153,37 +148,3 @@ def run_many(runs: Iterable[Run], workers: int = 1, cwd: str | None = None,
         pool.shutdown(wait=True)
 
 
-def read_summary(output_dir: str) -> dict | None:
-    """summary.json of a run (None if it wrote none)."""
-    path = os.path.join(output_dir, "summary.json")
-    if not os.path.exists(path):
-        return None
-    with open(path) as fh:
-        return json.load(fh)
-
-
-@dataclass(frozen=True)
-class StationSeries:
-    """A station's displacement series as station_displacement.csv holds it."""
-    time: np.ndarray        # (nt,) s
-    u: np.ndarray           # (nt, 3) m: ux, uy, uz relative to the initial state
-
-    def at(self, t: Sequence[float] | np.ndarray) -> np.ndarray:
-        """(len(t), 3): linear in time between the run's output times (t within them)."""
-        t = np.asarray(t, dtype=np.float64)
-        return np.stack([np.interp(t, self.time, self.u[:, k]) for k in range(3)], axis=1)
-
-
-def read_station_series(output_dir: str) -> dict[str, StationSeries]:
-    """The series of every station of a run, from its station_displacement.csv (a restart's rows in time
-    order; a time written twice keeps its last row)."""
-    rows: dict[str, dict[float, list[float]]] = {}
-    with open(os.path.join(output_dir, STATIONS_CSV), newline="") as fh:
-        for r in csv.DictReader(fh):
-            rows.setdefault(r["name"], {})[float(r["time_s"])] = [float(r["ux_m"]), float(r["uy_m"]),
-                                                                   float(r["uz_m"])]
-    series = {}
-    for name, by_time in rows.items():
-        t = np.array(sorted(by_time))
-        series[name] = StationSeries(t, np.array([by_time[x] for x in t], dtype=np.float64))
-    return series

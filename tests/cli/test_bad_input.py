@@ -166,7 +166,7 @@ CASES = [
     Case("bad_choice", scene("-pfault_bc_top_type", "clamped"), 1, "-pfault_bc_top_type: 'clamped' is not one of"),
     Case("missing_mesh_file", scene("-pfault_mesh_file", "nowhere.msh"), 1,
          "-pfault_mesh_file nowhere.msh: no such file; give a gmsh MSH 4.1 file"),
-    # material properties from spatial fields (pfault.properties): checked before anything is written
+    # material properties from spatial fields (pfault.materials.properties): checked before anything is written
     Case("field_with_nans", field_scene("young_modulus", "z,E [MPa]\n-100,10\n-50,nan\n0,10\n"), 1,
          "field.csv: 1 of 3 E are NaN or infinite (line 3); fill them (or remove those points) and run again"),
     Case("field_negative_modulus", field_scene("young_modulus", "z,E [MPa]\n-100,10\n0,-10\n"), 1,

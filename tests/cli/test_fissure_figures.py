@@ -1,4 +1,4 @@
-"""Figures of fissures that formed (pfault.io.fissures): the break map of each fault with broken faces and the
+"""Figures of fissures that formed (pfault.post.fissures): the break map of each fault with broken faces and the
 traces on the hazard map of the fissures that reached the land surface.
 
 The run directory is a real one (the fissure box, config/hard/fissure_box.opts, 2 steps on 1 rank: a vertical
@@ -11,11 +11,14 @@ whole width.
 """
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 
 from conftest import FISSURE_BOX, run_scene
+from pfault.io.output import open_h5, step_entry, write_xdmf
+from pfault.post import figures, fissures, margin_map, plots, rundir
 
 YEAR = 365.25 * 86400.0
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -24,7 +27,6 @@ PNG = b"\x89PNG\r\n\x1a\n"
 def _write_history(run_dir):
     """``broken`` and ``break_time`` in every step of fault.h5 (the history above), fault.xdmf listing them, and
     summary.json's figures of the fissure at the end; returns the times of the steps (s)."""
-    from pfault.io.output import open_h5, step_entry, write_xdmf
     with open_h5(str(run_dir / "fault.h5"), "r+") as f:
         pts, cells = f["mesh/points"][...], f["mesh/cells"][...]
         zc = pts[cells, 2].mean(axis=1)
@@ -61,13 +63,11 @@ def box_run(tmp_path_factory):
 def test_a_run_without_breaking_draws_as_before(box_run):
     """A pre-existing fault (every face broken from the start, no break time): no fissure formed, no fissure figure,
     no trace on the hazard map, the four figures as before and the fault's margins to failure."""
-    from pfault.io import figures as fg
-    from pfault.io import fissures, margin_map
     b = fissures.read_breaks(str(box_run))
     assert b is not None and len(b.broken) > 0 and not b.broken.any()
     assert fissures.fissure_figure(str(box_run)) is None
-    paths = fg.make_figures(str(box_run))
-    assert sorted(p.rsplit("/", 1)[-1] for p in paths) == sorted(fg.FIGURES + (margin_map.FIGURE,))
+    paths = figures.make_figures(str(box_run))
+    assert sorted(p.rsplit("/", 1)[-1] for p in paths) == sorted(figures.FIGURES + (margin_map.FIGURE,))
     assert not (box_run / fissures.FIGURE).exists()
 
 
@@ -75,16 +75,12 @@ def test_fissure_history_measured_and_drawn(box_run, tmp_path):
     """The fissure's extent at each output time, from the faces: buried at 5 years (1,000 m^2, 20 m deep, no
     surface trace), at the land surface at 10 years (2,000 m^2, 20 m deep, a 100 m trace at x = 375 m since 10
     years); the figures: fissure_break.png and the hazard map with the trace."""
-    import shutil
-
-    from pfault.io import figures as fg
-    from pfault.io import fissures
     run_dir = tmp_path / "box"
     shutil.copytree(box_run, run_dir)
     t = _write_history(run_dir)
     assert len(t) == 3 and t[1] == pytest.approx(5 * YEAR) and t[2] == pytest.approx(10 * YEAR)
     # fault.xdmf lists the new datasets, as a run that writes them does
-    assert fg.read_fault(str(run_dir)).cell_data["broken"].sum() == 32
+    assert rundir.read_fault(str(run_dir)).cell_data["broken"].sum() == 32
 
     first = fissures.read_breaks(str(run_dir), step=1)
     m = fissures.measures(str(run_dir), first)["fissure"]      # not the last output time: not summary.json's
@@ -101,7 +97,7 @@ def test_fissure_history_measured_and_drawn(box_run, tmp_path):
     assert m["broken_depth_m"] == pytest.approx(20.0, rel=1e-12)
     assert m["broken_length_m"] == pytest.approx(100.0, rel=1e-12)
     assert (m["first_break_time_s"], m["surface_break_time_s"]) == (t[1], t[2])
-    assert m["max_opening_m"] == pytest.approx(np.max(fg.read_fault(str(run_dir)).cell_data["opening"][
+    assert m["max_opening_m"] == pytest.approx(np.max(rundir.read_fault(str(run_dir)).cell_data["opening"][
         last.broken]), rel=1e-12)
     assert fissures.measures(str(run_dir), last)["fissure"] == pytest.approx(m, rel=1e-12, nan_ok=True)
     edges, face = fissures.surface_edges(last.faces, last.broken, on_top)
@@ -116,12 +112,12 @@ def test_fissure_history_measured_and_drawn(box_run, tmp_path):
     # the same time by its value, as the hazard map asks for it
     assert fissures.read_breaks(str(run_dir), time=t[1]).index == 1
 
-    paths = fg.make_figures(str(run_dir))
+    paths = figures.make_figures(str(run_dir))
     assert str(run_dir / fissures.FIGURE) in paths
     for name in (fissures.FIGURE, "hazard_map.png"):
         assert (run_dir / name).read_bytes()[:8] == PNG, name
 
-    plt = fg._pyplot()
+    plt = plots.pyplot()
     fig, ax = plt.subplots()
     assert fissures.draw_surface_traces(ax, str(run_dir), t[2], 1e-3) == pytest.approx(100.0, rel=1e-12)
     assert fissures.draw_surface_traces(ax, str(run_dir), t[1], 1e-3) == 0.0

@@ -11,7 +11,7 @@ import pytest
 from pyproj import CRS
 
 from conftest import OEDOMETER, PY, REPO, mpi_env
-from pfault.io.insar_write import write_opera
+from pfault.tools.insar_write import write_opera
 
 SITE = "config/site_example/site.opts"
 WHEN = [dt.datetime(2016, 1, 1, tzinfo=dt.timezone.utc), dt.datetime(2017, 1, 1, tzinfo=dt.timezone.utc)]

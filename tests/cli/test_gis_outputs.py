@@ -1,4 +1,4 @@
-"""The GIS layers of a run with -pfault_crs (pfault.io.gis), read back with GDAL/OGR (Debian's python3-gdal), as
+"""The GIS layers of a run with -pfault_crs (pfault.post.gis), read back with GDAL/OGR (Debian's python3-gdal), as
 QGIS reads them: one run of a small fissure box (a candidate surface that breaks to the land surface, stations, a
 LOS raster) placed in UTM zone 50N, checked for
 
@@ -21,6 +21,10 @@ import numpy as np
 import pytest
 
 from conftest import run_scene
+from pfault.errors import InputError
+from pfault.io.insar import read_netcdf
+from pfault.io.insar_grid import locate_product_pixels
+from pfault.tools.insar_write import write_opera
 
 gdal = pytest.importorskip("osgeo.gdal")
 from osgeo import ogr, osr  # noqa: E402
@@ -60,7 +64,6 @@ def centres(ds):
 
 
 def test_geotiffs_carry_the_crs_and_the_site_coordinates(run_dir):
-    from pfault.io.insar import read_netcdf
     los = read_netcdf(str(run_dir / "insar_los.nc"))
     with h5py.File(run_dir / "gis" / "surface_maps.nc") as nc:
         maps = {k: nc[k][-1] for k in ("subsidence", "horizontal_strain", "angular_distortion")}
@@ -173,8 +176,6 @@ def test_los_raster_on_an_insar_products_pixels(run_dir, tmp_path):
     """-pfault_insar_grid: an OPERA-like product whose pixels are the regular raster's plus a margin gives the same
     LOS there (its per-pixel LOS equal to the scene's), no-data off the land surface, and the product's CRS."""
     from pyproj import CRS
-    from pfault.io.insar import read_netcdf
-    from pfault.io.insar_write import write_opera
     regular = read_netcdf(str(run_dir / "insar_los.nc"))
     x = np.r_[regular["x"][0] - 25.0, regular["x"], regular["x"][-1] + 25.0]
     y = np.r_[regular["y"][0] - 25.0, regular["y"], regular["y"][-1] + 25.0]
@@ -200,9 +201,6 @@ def test_los_raster_on_an_insar_products_pixels(run_dir, tmp_path):
 
 def test_product_and_scene_crs_must_both_be_given(tmp_path):
     from pyproj import CRS
-    from pfault.errors import InputError
-    from pfault.io.insar_grid import locate_product_pixels
-    from pfault.io.insar_write import write_opera
     when = dt.datetime(2016, 1, 1, tzinfo=dt.timezone.utc)
     x = y = np.array([25.0, 75.0])
     product = write_opera(str(tmp_path / "p.nc"), x, y, CRS.from_epsg(32650), [when], [when], np.zeros((1, 2, 2)))

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from conftest import OEDOMETER
-from pfault.io.mf6_write import write_dis_grb, write_heads
+from pfault.tools.mf6_write import write_dis_grb, write_heads
 from test_bad_input import _error_lines, run_pfault
 
 COLUMN = """-options_file {oed}

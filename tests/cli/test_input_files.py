@@ -25,7 +25,7 @@ import h5py
 import numpy as np
 
 from conftest import OEDOMETER
-from pfault.io.mf6_write import write_dis_grb, write_heads
+from pfault.tools.mf6_write import write_dis_grb, write_heads
 from test_bad_input import _error_lines, run_pfault
 
 E, NU, RHO_G, H = 10e6, 0.25, 1000.0 * 9.80665, 100.0

@@ -19,6 +19,9 @@ import numpy as np
 import pytest
 
 from conftest import OEDOMETER, QUERETARO, REPO, WUXI, command, compare_runs, mpi_env, run_scene
+from pfault import hazard
+from pfault.io.output import RunWriter
+from pfault.post import rundir
 
 QRO = QUERETARO
 # -flow_ksp_rtol 1e-13: 2-rank flow solves are reproducible from run to run only to ~ksp_rtol; -ksp_atol 0: the
@@ -323,7 +326,6 @@ def test_new_run_replaces_an_old_result_only_after_its_first_step(tmp_path):
 
 def test_run_writer_stages_commits_and_abandons(tmp_path):
     """RunWriter alone: files go to a hidden sibling until commit; abandon removes it and nothing else."""
-    from pfault.io.output import RunWriter
     out = tmp_path / "out"
     out.mkdir()
     (out / "summary.json").write_text('{"old": true}')
@@ -364,7 +366,6 @@ def test_run_writer_stages_commits_and_abandons(tmp_path):
 # ------------------------------------------------------------------------------------------------------
 def test_hazard_fields_of_an_affine_displacement():
     """For u = A (x, y) + c the strain and tilt are exact on any triangles."""
-    from pfault.io import hazard
     rng = np.random.default_rng(3)
     pts = np.column_stack([rng.random((30, 2)) * 100.0, np.zeros(30)])
     tris = np.array([rng.choice(30, 3, replace=False) for _ in range(40)])
@@ -378,6 +379,21 @@ def test_hazard_fields_of_an_affine_displacement():
     assert np.allclose(f["angular_distortion"][ok], np.hypot(*A[2]), rtol=1e-9)
 
 
+def test_post_processing_commands_name_a_directory_without_a_run(tmp_path):
+    """python -m pfault.post.figures, and python -m pfault.io.figures (the command README gave before post-processing
+    had its own package), on a directory that holds no run: exit 1, one line naming it; python -m pfault.post.gis
+    on a path that is no directory: exit 2 and its usage line."""
+    for module in ("pfault.post.figures", "pfault.io.figures"):
+        proc = subprocess.run([sys.executable, "-m", module, str(tmp_path)], cwd=REPO, env=mpi_env(),
+                              capture_output=True, text=True, timeout=120)
+        assert (proc.returncode, proc.stdout) == (1, ""), module
+        assert proc.stderr == f"figures: {tmp_path}: no summary.json (not a pfault run directory)\n", module
+    proc = subprocess.run([sys.executable, "-m", "pfault.post.gis", str(tmp_path / "none")], cwd=REPO, env=mpi_env(),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr == "usage: python -m pfault.post.gis RUN_DIR  (a run written with -pfault_crs)\n"
+
+
 def test_plain_run_writes_figures_and_the_fissure_hazard_map(tmp_path):
     """mpirun -n 2 python -m pfault config/wuxi.opts (coarse): the figures, and the land surface's largest
     tensile strain over the ridge crest, where the fissure opens (x = 1000 m): in a surface triangle that
@@ -388,8 +404,7 @@ def test_plain_run_writes_figures_and_the_fissure_hazard_map(tmp_path):
     for name in ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png"):
         with open(run_dir / name, "rb") as fh:
             assert fh.read(8) == b"\x89PNG\r\n\x1a\n", name
-    from pfault.io import figures as fg
-    surf = fg.read_surface(str(run_dir))
+    surf = rundir.read_surface(str(run_dir))
     strain, tilt = surf.cell_data["horizontal_strain"], surf.cell_data["angular_distortion"]
     i = int(np.argmax(strain))
     x = surf.points[surf.cells[i], 0]

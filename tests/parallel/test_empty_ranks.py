@@ -21,6 +21,7 @@ import pytest
 
 from conftest import OEDOMETER, compare_runs, mpi_env, run_scene
 from pfault.io.insar import read_netcdf
+from pfault.post.rundir import read_summary
 from studies.run import run_captured
 
 RANKS = 8
@@ -95,12 +96,6 @@ def runs(tmp_path_factory):
     return {name: d / name for name in ("oed1", "oed8", "box1", "box8", "half1", "cont8")}
 
 
-def _summary(path):
-    import json
-    with open(path / "summary.json") as fh:
-        return json.load(fh)
-
-
 def _stations(path):
     with open(path / "station_displacement.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
@@ -115,14 +110,14 @@ def _raster(path):
 def test_the_meshes_leave_ranks_with_nothing(runs):
     """The premise: on 8 ranks some rank owns no cell, one owns cells but no vertex, and fault faces are on
     two ranks; the fault scene's rank 0 (the one that writes the gathered output) owns nothing."""
-    oed = _summary(runs["oed8"])["partition"]
+    oed = read_summary(runs["oed8"])["partition"]
     assert sum(oed["cells"]) == 6 and oed["cells"].count(0) == 2 and sum(oed["vertices"]) == 8
-    box = _summary(runs["box8"])["partition"]
+    box = read_summary(runs["box8"])["partition"]
     assert sum(box["cells"]) == 12 and sum(box["fault_faces"]) == 2 and sum(box["vertices"]) == 12
     assert box["cells"][0] == box["vertices"][0] == box["fault_faces"][0] == 0
     assert any(c > 0 and v == 0 for c, v in zip(box["cells"], box["vertices"]))
     assert sum(f > 0 for f in box["fault_faces"]) == 2
-    assert _summary(runs["box1"])["partition"] == {"cells": [12], "vertices": [12], "fault_faces": [2]}
+    assert read_summary(runs["box1"])["partition"] == {"cells": [12], "vertices": [12], "fault_faces": [2]}
 
 
 @pytest.mark.parametrize("scene", ["oed", "box"])
@@ -131,7 +126,7 @@ def test_eight_ranks_equal_one(runs, scene):
     1-rank run."""
     one, eight = runs[f"{scene}1"], runs[f"{scene}8"]
     compare_runs(one, eight, RTOL)
-    s1, s8 = _summary(one), _summary(eight)
+    s1, s8 = read_summary(one), read_summary(eight)
     assert s8["ranks"] == RANKS and s8["converged"]
     if scene == "oed":          # the analytic settlement of the column at t = 10 s: c_M alpha |dp| H
         assert s8["max_subsidence_m"] == pytest.approx(0.8333333333, rel=1e-9)
@@ -180,7 +175,7 @@ def test_restart_on_eight_ranks_gathered_equals_the_uninterrupted_run(runs):
     """The first step on 1 rank, continued on 8 ranks whose output is gathered to an empty rank 0: the
     uninterrupted 1-rank run, with its figures drawn."""
     cont = runs["cont8"]
-    s = _summary(cont)
+    s = read_summary(cont)
     assert s["restart"]["step"] == 1 and s["completed_steps"] == [1, 2] and s["ranks"] == RANKS
     compare_runs(runs["box1"], cont, RTOL)
     k1, u1 = _stations(runs["box1"])

@@ -14,11 +14,11 @@ from petsc4py import PETSc  # noqa: E402
 
 from pfault import fields  # noqa: E402
 from pfault.assembly.elastic import ElasticAssembler  # noqa: E402
+from pfault.materials.properties import CellProperties  # noqa: E402
 from pfault.mesh import distributed  # noqa: E402
 from pfault.mesh.box import box_mesh  # noqa: E402
 from pfault.physics import elasticity as el  # noqa: E402
 from pfault.physics.loading import MaterialDrawdown  # noqa: E402
-from pfault.properties import CellProperties  # noqa: E402
 from pfault.scene import Material  # noqa: E402
 from pfault.solver.equations import Equations  # noqa: E402
 from pfault.sources import TableSource  # noqa: E402

@@ -9,7 +9,8 @@ import pytest
 from pfault.tools.calibration import Problem, statistics
 from pfault.tools.calibration_input import (CalibrationInputError, Observations, read_observations,
                                             read_parameters)
-from pfault.tools.runs import StationSeries, error_line, option_args, read_station_series
+from pfault.post.rundir import StationSeries, read_station_series
+from pfault.tools.runs import error_line, option_args
 
 
 def test_statistics_of_a_straight_line_equal_numpy_polyfit():

@@ -1,6 +1,8 @@
 """The package's shape (issue 30, "Must hold"): no class over 250 lines or 20 instance attributes, no function over
-60 lines, in pfault/; type hints on every public function and method. Lines of tables (dict, list, tuple and set
-displays of constants, names and calls on them, three lines or more) do not count. Plain ``ast``, no MPI.
+60 lines, in pfault/; type hints on every public function and method; imports at the top of the file (but the
+heavy dependencies a run may not need, and PETSc/MPI where a module is imported without them) and no import cycle
+among pfault's modules. Lines of tables (dict, list, tuple and set displays of constants, names and calls on them,
+three lines or more) do not count. Plain ``ast``, no MPI.
 
 A class's instance attributes are the names its methods assign on their first argument (``self.x = ...``, also
 through tuples, ``+=`` and annotations) together with the annotated names of its body (dataclass fields; ClassVar
@@ -212,3 +214,189 @@ def test_hint_checker(tmp_path):
         "    def m(self, a: int) -> int:\n        return a\n\n"
         "class _P:\n    def m(self, a):\n        pass\n")
     assert untyped(tmp_path / "pkg") == {"pkg/m.py::f": ["b", "*args"], "pkg/m.py::C.__init__": ["return"]}
+
+
+# Imports that may stand inside a function: heavy dependencies that a run imports only when it needs them. Each entry
+# is a promise kept by the reason beside it (and one that no function imports any more is an error: take it out).
+DEFERRED_IMPORTS: dict[str, str] = {
+    "matplotlib": "figures (pfault.post, the calibration's and the scenarios' reports) and the triangle search of a "
+                  "land surface (a head file on scattered points, an InSAR product's pixels): a run without them "
+                  "(-pfault_figures false) never loads it",
+    "gmsh": "meshing the built-in geometries and reading .msh files: a box scene does not need it",
+    "flopy": "MODFLOW 6 binary heads (-pfault_heads_grid) only",
+    "scipy": "material properties given as fields (field:FILE), NetCDF-3 fields, the calibration's least squares",
+    "meshio": "the XDMF series of a run directory read back (pfault.post.rundir)",
+    "h5netcdf": "the LOS raster and the GIS maps (-pfault_insar_los, -pfault_crs) and InSAR products",
+    "pyproj": "a CRS: -pfault_crs, a head file's or an InSAR product's",
+    "rasterio": "the GeoTIFFs of gis/ (-pfault_crs)",
+    "affine": "the GeoTIFFs' geotransform, with rasterio",
+}
+
+# PETSc and MPI start when they are imported: these modules import them (or the pfault modules that do) where they
+# use them, each with its reason.
+PETSC_LATER: dict[str, tuple[tuple[str, ...], str]] = {
+    "pfault/__main__.py": (("petsc4py", "pfault.options", "pfault.cli"),
+                           "reads the command line and the scene first: petsc4py.init must see its options"),
+    "pfault/errors.py": (("mpi4py",), "imported by pfault/__main__.py before petsc4py.init"),
+    "pfault/io/output.py": (("petsc4py", "mpi4py"), "the versions a run records; post-processing imports the "
+                                                    "module (open_h5, read_options) and starts neither"),
+    "pfault/io/probes.py": (("mpi4py",), "its geometry serves the materials' fields and the GIS layers without MPI"),
+    "pfault/io/parallel.py": (("mpi4py",), "its shape agreement is unit-tested without MPI "
+                                           "(tests/unit/test_agree_shapes.py)"),
+}
+
+
+def _function_imports(root: Path) -> list[tuple[str, int, str]]:
+    """(file, line, module) of every import inside a function, ``module`` with its leading dots."""
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        for fn in ast.walk(tree):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom):
+                    names = [("." * node.level) + (node.module or "")]
+                else:
+                    continue
+                found += [(path.relative_to(root.parent).as_posix(), node.lineno, name) for name in names]
+    return sorted(set(found))
+
+
+def _excused(file: str, name: str) -> bool:
+    later = PETSC_LATER.get(file, ((), ""))[0]
+    return name.split(".")[0] in DEFERRED_IMPORTS or name in later or name.split(".")[0] in later
+
+
+def inner_imports(root: Path = PACKAGE) -> list[str]:
+    """Imports inside functions that are neither of DEFERRED_IMPORTS nor of PETSC_LATER: "path:line module"."""
+    return [f"{file}:{line} {name}" for file, line, name in _function_imports(root) if not _excused(file, name)]
+
+
+def module_imports(root: Path = PACKAGE) -> dict[str, set[str]]:
+    """{module: the modules of the package it imports at its top level (outside functions; not the imports under
+    ``if TYPE_CHECKING:``, which are not run)}."""
+    top = root.name
+    graph: dict[str, set[str]] = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        package = parts if path.name == "__init__.py" else parts[:-1]
+        deps: set[str] = set()
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names if a.name.split(".")[0] == top}
+            elif isinstance(node, ast.ImportFrom):
+                base = package[:len(package) - node.level + 1] if node.level else []
+                mod = ".".join(base + ([node.module] if node.module else [])) if node.level else (node.module or "")
+                if mod.split(".")[0] != top:
+                    continue
+                deps.add(mod)
+                deps |= {f"{mod}.{a.name}" for a in node.names}
+        graph[".".join(parts)] = deps
+    return {m: {d for d in deps if d in graph and d != m} for m, deps in graph.items()}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import cycles among the package's modules: each strongly connected component of more than one module
+    (Tarjan), sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out)
+
+
+def test_no_import_inside_a_function():
+    assert inner_imports() == []
+
+
+def test_every_deferred_import_is_still_needed():
+    found = _function_imports(PACKAGE)
+    stale = [name for name in DEFERRED_IMPORTS if not any(n.split(".")[0] == name for _, _, n in found)]
+    stale += [f"{file} {name}" for file, (names, _) in PETSC_LATER.items() for name in names
+              if not any(f == file and (n == name or n.split(".")[0] == name) for f, _, n in found)]
+    assert not stale, f"imported at the top now (or no longer at all): take them out: {stale}"
+
+
+def test_no_import_cycle():
+    assert cycles(module_imports()) == []
+
+
+def _started_on_import(root: Path) -> dict[str, set[str]]:
+    """{module: which of petsc4py and mpi4py it imports at its top level}."""
+    out = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root.parent).with_suffix("").parts)
+        names = set()
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                names.add((node.module or "").split(".")[0])
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = names & {"petsc4py", "mpi4py"}
+    return out
+
+
+def test_post_processing_starts_neither_petsc_nor_mpi():
+    """What pfault.post imports, all the way down, imports neither petsc4py nor mpi4py at its top: figures and GIS
+    layers are made from a run directory in any process, and no run-time module imports pfault.post but the run's
+    top (pfault.simulation) and the tools that start runs."""
+    graph, started = module_imports(), _started_on_import(PACKAGE)
+    seen, todo = set(), [m for m in graph if m.startswith("pfault.post")]
+    while todo:
+        m = todo.pop()
+        if m not in seen:
+            seen.add(m)
+            todo += graph[m]
+    assert {m: started[m] for m in seen if started[m]} == {}
+    users = {m for m, deps in graph.items() if not m.startswith("pfault.post") and any(d.startswith("pfault.post")
+                                                                                       for d in deps)}
+    assert users <= {"pfault.simulation", "pfault.scenarios", "pfault.io.figures.__main__"} | {
+        m for m in graph if m.startswith("pfault.tools")}, users
+
+
+def test_import_checkers(tmp_path):
+    """The checkers on a made-up package: a cycle through a ``from . import`` and a relative import of a sibling's
+    name, an import under TYPE_CHECKING that closes no cycle, an inner import of the package flagged, a deferred
+    heavy dependency not, and PETSc deferred only where PETSC_LATER says."""
+    pkg = tmp_path / "pfault"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .sub import b\n\ndef f():\n    import matplotlib\n    from . import c\n")
+    (pkg / "sub" / "b.py").write_text("from ..c import thing\n")
+    (pkg / "c.py").write_text("from typing import TYPE_CHECKING\nfrom pfault import a\nif TYPE_CHECKING:\n"
+                              "    from .sub import b\n\ndef g():\n    from petsc4py import PETSc\n")
+    graph = module_imports(pkg)
+    assert graph["pfault.a"] == {"pfault.sub", "pfault.sub.b"} and graph["pfault.c"] == {"pfault", "pfault.a"}
+    assert cycles(graph) == [["pfault.a", "pfault.c", "pfault.sub.b"]]
+    assert inner_imports(pkg) == ["pfault/a.py:5 .", "pfault/c.py:7 petsc4py"]

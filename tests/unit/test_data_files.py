@@ -1,20 +1,20 @@
 """The data files a run reads, in-process on one rank: every option that names a file says 'is a directory' of a
-directory (not 'no such file'), and the record of the files (pfault.io.provenance: size, SHA-256) and its comparison
+directory (not 'no such file'), and the record of the files (pfault.provenance: size, SHA-256) and its comparison
 with a continued run's own, with the line that ends a continued run whose files changed."""
 
 import hashlib
 
 import pytest
 
+from pfault import provenance
 from pfault.errors import InputError
-from pfault.io import provenance
-from pfault.io.field_files import read_field
-from pfault.io.head_files import read_mf6_grid
 from pfault.io.stations import read_stations
+from pfault.materials.field_files import read_field
 from pfault.mesh.gmsh_io import read_msh
 from pfault.model import _check_restart_dir
 from pfault.options import SPECS
 from pfault.optionsfile import ArgumentError, read_options_file
+from pfault.sources.head_files import read_mf6_grid
 from pfault.sources.heads import HeadsSettings, check_heads_files
 from pfault.tools.calibration_input import CalibrationInputError, read_parameters
 

@@ -1,10 +1,10 @@
-"""Fissure-prone length and area of the land surface (pfault.io.hazard.fissure_prone) on structured triangle
+"""Fissure-prone length and area of the land surface (pfault.hazard.fissure_prone) on structured triangle
 grids with displacements whose strain is known in closed form (NumPy only)."""
 
 import numpy as np
 import pytest
 
-from pfault.io.hazard import fissure_prone
+from pfault.hazard import fissure_prone
 
 
 def grid(nx, ny, lx, ly, angle=0.0):

@@ -1,6 +1,6 @@
 """A groundwater model's heads as a pore-pressure source (pfault.sources.heads), in-process on one rank:
 
-- MODFLOW 6 grid (DIS, DISV) and head files written from NumPy (pfault.io.mf6_write) read back unchanged by flopy;
+- MODFLOW 6 grid (DIS, DISV) and head files written from NumPy (pfault.tools.mf6_write) read back unchanged by flopy;
 - the cell of a point (DIS with rotation, DISV of triangles and quadrilaterals, the layer from TOP/BOTM) equals
   flopy's own grid intersection;
 - a head field varying in x gives each cell the head of the MODFLOW cell of its centroid, linear in time between
@@ -21,11 +21,12 @@ from flopy.mf6.utils import MfGrdFile
 from mpi4py import MPI
 
 from pfault.errors import InputError
-from pfault.io.mf6_write import write_dis_grb, write_disv_grb, write_heads
 from pfault.physics.loading import MaterialDrawdown, Table
 from pfault.sources import TableSource, lookup, zero_on
 from pfault.sources.coverage import measure
+from pfault.sources.head_files import read_mf6_grid
 from pfault.sources.heads import HeadsSettings, HeadsSource, build_heads_source, check_heads_files
+from pfault.tools.mf6_write import write_dis_grb, write_disv_grb, write_heads
 
 RHO_G = 1000.0 * 9.80665
 
@@ -127,7 +128,6 @@ def flopy_cells(mg, x, y, z, ncpl):
 
 @pytest.mark.parametrize("kind", ["DIS", "DISV"])
 def test_cell_of_a_point_is_flopys(tmp_path, kind):
-    from pfault.io.head_files import read_mf6_grid
     if kind == "DIS":
         path, *_ = dis_model(tmp_path, angrot=30.0, xorigin=500.0, yorigin=-300.0)
         box = (470, 565, -305, -218)

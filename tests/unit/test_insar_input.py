@@ -1,4 +1,4 @@
-"""InSAR products read in-process (pfault.tools.insar_input): OPERA DISP-S1's layout and MintPy's give the same
+"""InSAR products read in-process (pfault.io.insar_input): OPERA DISP-S1's layout and MintPy's give the same
 pixels, dates, reference and values; an axis in either order is read the same; NaN and masked values stay NaN
 (skipped, never filled); each bad form (no reference date, values not on the axes, an axis out of order, no value
 at all, dates out of order) is one line naming the file and the fix. The model's LOS in time (insar_fit._at)."""
@@ -11,9 +11,9 @@ import pytest
 from pyproj import CRS
 
 from pfault.errors import InputError
-from pfault.io.insar_write import write_mintpy, write_opera
+from pfault.io.insar_input import read_insar_product
 from pfault.tools.insar_fit import _at, parse_reference
-from pfault.tools.insar_input import read_insar_product
+from pfault.tools.insar_write import write_mintpy, write_opera
 
 UTC = dt.timezone.utc
 DATES = [dt.datetime(2016 + k, 3, 1, tzinfo=UTC) for k in range(4)]

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from pyproj import CRS, Transformer
 
-from pfault.io.mf6_netcdf_write import mesh, structured
 from pfault.errors import InputError
 from pfault.sources.heads import HeadsSettings
 from pfault.sources.netcdf_heads import Reprojected, open_mf6_netcdf
+from pfault.tools.mf6_netcdf_write import mesh, structured
 
 UTM = CRS.from_epsg(32650)           # the scene's: WGS 84 / UTM zone 50N
 GK = CRS.from_epsg(4547)             # the model's: CGCS2000 / 3-degree Gauss-Kruger CM 114E

@@ -1,4 +1,5 @@
-"""Spatial material fields (pfault.properties, pfault.io.field_files): formats, interpolation, checks.
+"""Spatial material fields (pfault.materials.properties, pfault.materials.field_files): formats, interpolation,
+checks.
 
 The bilinear values are computed by hand from the map's four corners around each point; scattered points
 reproduce a linear function exactly; the same grid in CSV, HDF5 and NetCDF gives the same values.
@@ -8,11 +9,11 @@ import h5py
 import numpy as np
 import pytest
 
-from pfault import properties as pr
 from pfault.errors import InputError
-from pfault.paths import beside_scene
-from pfault.io.field_files import read_field
+from pfault.materials import properties as pr
+from pfault.materials.field_files import read_field
 from pfault.mesh.box import box_mesh
+from pfault.paths import beside_scene
 from pfault.scene import Material
 
 OPTION = "pfault_material_clay_young_modulus"

@@ -27,7 +27,7 @@ import pytest
 
 from conftest import FISSURE_BOX, compare_runs, run_scene
 from pfault.faults import contact as ct
-from pfault.io import figures as fg
+from pfault.post import rundir
 
 E, NU = 10e6, 0.25
 G = E / (2 * (1 + NU))
@@ -108,8 +108,8 @@ def write_scene(directory, text, name):
 
 
 def fault_steps(out):
-    first = fg.read_fault(str(out), 0)
-    return [first.cell_data] + [fg.read_fault(str(out), k).cell_data for k in range(1, first.num_steps)]
+    first = rundir.read_fault(str(out), 0)
+    return [first.cell_data] + [rundir.read_fault(str(out), k).cell_data for k in range(1, first.num_steps)]
 
 
 @pytest.mark.parametrize("ranks", [1, 2])
@@ -228,7 +228,7 @@ def test_fissure_depth_and_extent_in_a_layered_box(tmp_path):
     _, glued = run_scene(FISSURE_BOX, tmp_path / "glued", extra=[
         *BOX, "-pfault_fault_fissure_tensile_strength", "1e12", "-pfault_time_steps", "1"])
     assert glued["faults"]["fissure"]["faces_broken"] == 0
-    snap = fg.read_fault(str(tmp_path / "glued"), -1)
+    snap = rundir.read_fault(str(tmp_path / "glued"), -1)
     tn = snap.cell_data["traction_normal_effective"]
     top = 0.0                                     # the box's land surface
     depth = top - snap.points[snap.cells][:, :, 2].min(axis=1)

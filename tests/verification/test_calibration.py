@@ -12,7 +12,7 @@ import pytest
 
 from conftest import run_scene
 from studies import calibration_twin as twin
-from pfault.tools.runs import read_station_series
+from pfault.post.rundir import read_station_series
 
 DAYS = [15, 30, 60, 90, 120]
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import QUERETARO, WUXI, run_scene
-from pfault.io import figures as fg
+from pfault.post import meshes, rundir
 
 SMALL = ("-pfault_mesh_size_factor", "4", "-pfault_time_steps", "3")
 WUXI_CREST_X = 1000.0
@@ -54,15 +54,15 @@ def queretaro(tmp_path_factory):
 
 
 def _surface_subsidence(run_dir):
-    f = fg.read_fields(run_dir)
-    top = np.unique(fg.top_surface(f.points, f.cells))
+    f = rundir.read_fields(run_dir)
+    top = np.unique(meshes.top_surface(f.points, f.cells))
     return f.points[top], -f.point_data["displacement"][top, 2], f
 
 
 def _minus_cells(fields, fault):
     """Index of the minus-side tetrahedron of every fault triangle (see the module docstring)."""
     n = len(fields.points)
-    faces = np.sort(fields.cells[:, fg.TET_FACES].reshape(-1, 3), axis=1)
+    faces = np.sort(fields.cells[:, meshes.TET_FACES].reshape(-1, 3), axis=1)
     keys = (faces[:, 0] * n + faces[:, 1]) * n + faces[:, 2]
     tri = np.sort(fault.cells, axis=1)
     want = (tri[:, 0] * n + tri[:, 1]) * n + tri[:, 2]
@@ -94,9 +94,9 @@ def test_wuxi_subsidence_follows_bedrock_depth(wuxi):
 
 def test_wuxi_fissure_opens_near_the_surface(wuxi):
     run_dir, summary = wuxi[2]
-    fault = fg.read_fault(run_dir)
+    fault = rundir.read_fault(run_dir)
     opening = fault.cell_data["opening"]
-    _, area, cen = fg.face_geometry(fault.points, fault.cells)
+    _, area, cen = meshes.face_geometry(fault.points, fault.cells)
     assert summary["max_fault_opening_m"] > 0.0
     # the reported opening is the open faces' (a closed face's jump is the discretisation's)
     assert opening[fault.cell_data["state"] == 2].max() == pytest.approx(summary["max_fault_opening_m"], rel=1e-12)
@@ -106,8 +106,8 @@ def test_wuxi_fissure_opens_near_the_surface(wuxi):
     ztop, zbot = fault.points[fault.cells, 2].max(), fault.points[fault.cells, 2].min()
     w = np.clip(opening, 0.0, None) * area
     assert (w * cen[:, 2]).sum() / w.sum() > 0.5 * (ztop + zbot)
-    f = fg.read_fields(run_dir)
-    surf_open, _ = fg.surface_fault_jumps(f, fault)
+    f = rundir.read_fields(run_dir)
+    surf_open, _ = meshes.surface_fault_jumps(f, fault)
     assert surf_open >= opening.max(), "the nodal opening at the surface bounds the face averages"
 
 
@@ -117,7 +117,7 @@ def test_wuxi_fissure_prone_length_is_the_fissure_trace(wuxi):
     extent along its mean fissure direction (10,000 m when the sides were counted apart)."""
     run_dir, summary = wuxi[2]
     assert summary["max_fissure_prone_length_m"] == pytest.approx(5000.0, rel=2e-3)
-    surf = fg.read_surface(run_dir)
+    surf = rundir.read_surface(run_dir)
     prone = surf.cell_data["horizontal_strain"] > summary["hazard_strain_threshold"]
     x = surf.points[surf.cells[prone]][:, :, 0]
     assert (x.min() < WUXI_CREST_X - 1.0) and (x.max() > WUXI_CREST_X + 1.0)    # on both sides of the trace
@@ -148,11 +148,11 @@ def test_queretaro_subsidence_on_sediment_side_near_wells(queretaro):
 
 def test_queretaro_sediment_side_slides_down(queretaro):
     run_dir, summary = queretaro[2]
-    fields, fault = fg.read_fields(run_dir), fg.read_fault(run_dir)
-    normals, area, cen = fg.face_geometry(fault.points, fault.cells)
+    fields, fault = rundir.read_fields(run_dir), rundir.read_fault(run_dir)
+    normals, area, cen = meshes.face_geometry(fault.points, fault.cells)
     # which side is which: the minus cell of each face is rock and lies behind the normal
     minus = _minus_cells(fields, fault)
-    names = fg.read_materials(run_dir)
+    names = rundir.read_materials(run_dir)
     assert {names[int(m)] for m in np.unique(fields.cell_data["material"][minus])} == {"rock"}
     behind = np.einsum("ij,ij->i", fields.points[fields.cells[minus]].mean(axis=1) - cen, normals)
     assert np.all(behind < 0.0), "the normal points from the minus (rock) to the plus (sediment) side"
@@ -161,7 +161,7 @@ def test_queretaro_sediment_side_slides_down(queretaro):
     mag = np.linalg.norm(slip, axis=1)
     # the reported slip is that of the faces that have slid (a stuck face's jump is the discretisation's)
     assert mag[fault.cell_data["slid"] == 1].max() == pytest.approx(summary["max_fault_slip_m"], rel=1e-12)
-    dip = fg.dip_slip(slip, normals)
+    dip = meshes.dip_slip(slip, normals)
     big = mag > 0.25 * mag.max()
     assert big.any()
     assert np.all(dip[big] < 0.0)
@@ -171,7 +171,7 @@ def test_queretaro_sediment_side_slides_down(queretaro):
 
 def test_queretaro_drawdown_largest_at_wells(queretaro):
     run_dir, summary = queretaro[2]
-    f = fg.read_fields(run_dir)
+    f = rundir.read_fields(run_dir)
     dd = -f.point_data["head_change"]
     imax = int(np.argmax(dd))
     last = [s for s in summary["steps"] if "max_drawdown_m" in s][-1]

@@ -12,7 +12,7 @@ import pytest
 
 from conftest import FISSURE_BOX, QUERETARO, TWO_BLOCKS, WUXI, run_scene
 from pfault.faults import contact as ct
-from pfault.io import figures as fg
+from pfault.post import rundir
 
 ABS = 1e-9          # m
 REL = 1e-8          # of the largest jump of the step
@@ -32,8 +32,8 @@ SCENES = {
 
 
 def jumps_by_step(out):
-    first = fg.read_fault(str(out), 0)
-    steps = [first] + [fg.read_fault(str(out), k) for k in range(1, first.num_steps)]
+    first = rundir.read_fault(str(out), 0)
+    steps = [first] + [rundir.read_fault(str(out), k) for k in range(1, first.num_steps)]
     return [s.cell_data for s in steps]
 
 

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import FISSURE_BOX, TWO_BLOCKS, read_last_step, run_scene, run_script
+from pfault.post import meshes, rundir
 
 SCENE = TWO_BLOCKS
 P = 1.0e6                                   # normal pressure on the fault (Pa)
@@ -313,11 +314,10 @@ def test_fault_pore_pressure_clamped_above_the_lowered_water_table(runs, ranks, 
     """t_N,eff - t_N = alpha p with p = rho_w g (-z - drawdown) at the face centroid (alpha = 1): clamped at 0 by
     default (faces at z = -1/6, -1/3 lie above the lowered water table at z = -0.5: dry), negative with
     -pfault_contact_suction true; the faces below (z = -2/3, -5/6) carry p > 0 either way."""
-    from pfault.io import figures as fg
     s, f, out = runs("water_table", ranks, ["-pfault_contact_suction", "true" if suction else "false"])
     assert s["converged"]
-    fault = fg.read_fault(str(out))
-    _, _, cen = fg.face_geometry(fault.points, fault.cells)
+    fault = rundir.read_fault(str(out))
+    _, _, cen = meshes.face_geometry(fault.points, fault.cells)
     p = RHO_G * (-cen[:, 2] - DRAWDOWN)
     assert np.sum(p < 0) and np.sum(p > 0), "faces on both sides of the lowered water table"
     expected = p if suction else np.maximum(p, 0.0)

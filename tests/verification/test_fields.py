@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import OEDOMETER, TWO_BLOCKS, compare_runs, read_last_step, run_scene, write_flow_box
+from pfault.materials.field_files import read_field
 
 SITE = "config/site_example/site.opts"
 
@@ -161,7 +162,6 @@ def test_site_example_clay_map(tmp_path):
     """config/site_example/site.opts: the clay's modulus from a map in site coordinates (4.2-7 MPa at its nodes, the
     mesh placed by -pfault_mesh_origin). Every station's settlement lies between those of the same site with the clay uniformly at
     the map's smallest and largest value, and strictly inside where the map is not at either bound."""
-    from pfault.io.field_files import read_field
     field = read_field("config/site_example/site_clay_modulus.csv", "pfault_material_clay_young_modulus", "Pa")
     lo_e, hi_e = field.values.min(), field.values.max()
     assert field.is_grid and 4e6 <= lo_e < 4.5e6 and 6.8e6 < hi_e <= 7e6

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from conftest import OEDOMETER, compare_runs, run_scene
-from pfault.io.mf6_write import write_dis_grb, write_disv_grb, write_heads
+from pfault.tools.mf6_write import write_dis_grb, write_disv_grb, write_heads
 
 E, NU = 10e6, 0.25
 C_M = (1 + NU) * (1 - 2 * NU) / (E * (1 - NU))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pyproj import CRS
 
-from pfault.io.mf6_netcdf_write import mesh, structured
+from pfault.tools.mf6_netcdf_write import mesh, structured
 from test_heads import BOTTOMS, EXACT, ORIGIN, assert_column, column, column_heads, dis_files
 
 UTM = CRS.from_epsg(32650)

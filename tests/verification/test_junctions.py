@@ -23,7 +23,7 @@ import pytest
 
 from conftest import read_last_step, run_scene, run_script
 from pfault.faults import contact as ct
-from pfault.io import figures as fg
+from pfault.post import rundir
 
 E, NU = 10.0e6, 0.25
 LX, LY, LZ = 4.0, 4.0, 2.0
@@ -87,7 +87,7 @@ def solve(tmp_path, case, load, ranks):
     _, summary = run_scene(str(scene), tmp_path / "out", ranks=ranks, extra=options(case, load, ranks))
     assert summary["converged"], case
     points, _, point_data, cell_data = read_last_step(tmp_path / "out")
-    fault = fg.read_fault(str(tmp_path / "out"))
+    fault = rundir.read_fault(str(tmp_path / "out"))
     return points, np.asarray(point_data["displacement"]), np.asarray(cell_data["stress"][0]), fault
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from conftest import WUXI, run_scene
+from pfault.post import fissures, meshes
 
 SCENE = "config/wuxi_fissure.opts"
 COARSE = ["-pfault_mesh_size_factor", "2"]
@@ -69,14 +70,12 @@ def test_whole_plane_broken_and_open_at_the_end_as_the_plain_scene(runs):
     """At 10 years: every face broken (area, depth 5 m, length 5,000 m of the plane), the fissure at the land
     surface from its first break on (it starts there), at most 15 Newton iterations in a step, the opening and
     subsidence of the plain scene."""
-    from pfault.io import figures as fg
-    from pfault.io import fissures
     base, s = runs
     fis = s["fissure"]
     assert fis["converged"] and max(r["newton_its"] for r in fis["steps"]) <= 15
     last = fissures.read_breaks(str(base / "fissure"))
     assert last.broken.all() and np.all(np.isfinite(last.break_time))
-    _, area, _ = fg.face_geometry(last.points, last.faces)
+    _, area, _ = meshes.face_geometry(last.points, last.faces)
     f = fis["faults"]["fissure"]
     assert f["broken_area_m2"] == pytest.approx(area.sum(), rel=1e-9)
     assert f["broken_area_m2"] == pytest.approx(5.0 * 5000.0, rel=1e-9)

@@ -28,11 +28,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..mesh.serial import TET_FACES, locate_faces
+from .mesh.serial import TET_FACES, locate_faces
 
 if TYPE_CHECKING:
-    from ..mesh.fault import FaultSplit
-    from ..mesh.serial import SerialMesh
+    from .mesh.fault import FaultSplit
+    from .mesh.serial import SerialMesh
 
 FIELDS = ("horizontal_strain", "angular_distortion")
 

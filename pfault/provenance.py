@@ -27,9 +27,10 @@ import json
 import os
 from typing import Any
 
-from ..errors import InputError, run_on_root, warn
-from ..paths import beside_scene
-from ..properties import field_refs
+from .errors import InputError, run_on_root, warn
+from .io.output import open_h5
+from .materials.properties import field_refs
+from .paths import beside_scene
 
 JSON_NAME = "input_files.json"      # in the run directory, beside options.txt and versions.json
 DATASET = "input_files"             # JSON dataset of checkpoint.h5
@@ -44,7 +45,7 @@ FILE_OPTIONS = ("pfault_mesh_file", "pfault_heads_file", "pfault_heads_grid", "p
 def scene_files(scene: Any, stations_file: str, scene_file: str) -> list[tuple[str, str]]:
     """(option, path) of every data file the run of ``scene`` (pfault.model.Scene) reads, each path as its reader
     found it: the mesh, the heads and their grid, the material properties' fields (found beside the scene file
-    ``scene_file`` as pfault.properties.read_fields finds them) and the stations (``stations_file``, '' for
+    ``scene_file`` as pfault.materials.properties.read_fields finds them) and the stations (``stations_file``, '' for
     none)."""
     files = []
     if scene.settings.mesh_file:
@@ -81,7 +82,6 @@ def record(comm: Any, files: list[tuple[str, str]]) -> list[dict[str, Any]]:
 
 def recorded(run_dir: str, checkpoint_name: str) -> list[dict[str, Any]] | None:
     """The record in the checkpoint ``checkpoint_name`` of ``run_dir``, None when it has none (rank 0)."""
-    from .output import open_h5
     with open_h5(os.path.join(run_dir, checkpoint_name), "r") as h5:
         if DATASET not in h5:
             return None

@@ -1,5 +1,5 @@
 """A run's answer as GIS layers in ``gis/`` (``-pfault_crs``), read from the run's files at its end, or by ``python -m
-pfault.io.gis RUN_DIR`` for any run directory written with a CRS:
+pfault.post.gis RUN_DIR`` for any run directory written with a CRS:
 
 - rasters, each a GeoTIFF with its CRS and geotransform (GDAL, QGIS, ArcGIS, rasterio): ``subsidence.tif`` (m,
   downward positive), ``horizontal_strain.tif`` (largest principal horizontal strain, tension positive) and
@@ -25,8 +25,6 @@ whole and renamed.
 
 from __future__ import annotations
 
-import csv
-import json
 import os
 import sys
 from dataclasses import dataclass
@@ -34,11 +32,16 @@ from typing import Any
 
 import numpy as np
 
+from ..georef import Transform, cf_time_units, crs_from_cf, dates, decimal_year, parse_date, true_east_north
+from ..hazard import _zones
+from ..io.geopackage import Layer, write_geopackage
+from ..io.insar import read_netcdf
+from ..io.output import open_h5, replace_text
+from ..io.probes import _pixels_in_triangles
+from ..io.rasters import add_grid_mapping, write_geotiff
+from ..units import parse_quantity
 from . import fissures
-from .figures import read_options
-from .geopackage import Layer, write_geopackage
-from .output import open_h5
-from .probes import _pixels_in_triangles
+from .rundir import read_options, read_station_series, read_summary, read_surface_steps
 
 DIR = "gis"
 STATE_NAMES = ("stick", "slip", "open")
@@ -61,11 +64,8 @@ class GisContext:
 
 def read_context(run_dir: str) -> GisContext | None:
     """The run's GIS context from its summary.json (``georef``) and options.txt; None without a CRS."""
-    from ..georef import parse_date
-    from ..units import parse_quantity
     try:
-        with open(os.path.join(run_dir, "summary.json")) as fh:
-            georef = json.load(fh).get("georef") or {}
+        georef = (read_summary(run_dir) or {}).get("georef") or {}
     except (OSError, ValueError):
         return None
     if not georef.get("crs"):
@@ -121,43 +121,9 @@ def pixel_map(xy: np.ndarray, triangles: np.ndarray, spacing: float | None) -> P
     return PixelMap(x, y, pixel[one], flat[k[one]], lam[one])
 
 
-def write_geotiff(path: str, x: np.ndarray, y: np.ndarray, values: np.ndarray, crs: Any,
-                  tags: dict | None = None) -> str:
-    """A one-band float64 GeoTIFF of ``values`` (ny, nx) on pixel centres ``x``, ``y`` (regular, ascending; written
-    north up), NaN no-data, in ``crs`` (pyproj); ``tags``: metadata of the band (units, time)."""
-    import rasterio
-    from affine import Affine
-    dx = float(x[1] - x[0]) if len(x) > 1 else 1.0
-    dy = float(y[1] - y[0]) if len(y) > 1 else dx
-    transform = Affine(dx, 0.0, float(x[0]) - dx / 2, 0.0, -dy, float(y[-1]) + dy / 2)
-    tmp = path + ".tmp.tif"
-    with rasterio.open(tmp, "w", driver="GTiff", width=len(x), height=len(y), count=1, dtype="float64",
-                       crs=rasterio.crs.CRS.from_wkt(crs.to_wkt()), transform=transform, nodata=np.nan,
-                       compress="deflate") as dst:
-        dst.write(np.asarray(values, dtype=np.float64)[::-1], 1)
-        if tags:
-            dst.update_tags(1, **{k: str(v) for k, v in tags.items()})
-            dst.set_band_description(1, str(tags.get("long_name", "")))
-    os.replace(tmp, path)
-    return path
-
-
-def _surface_steps(run_dir: str) -> tuple[np.ndarray, np.ndarray, list]:
-    """surface.h5: its points (mesh coordinates), triangles, and per output time (step, time, displacement,
-    horizontal strain, angular distortion)."""
-    with open_h5(os.path.join(run_dir, "surface.h5"), "r") as f:
-        points, tris = f["mesh/points"][...], f["mesh/cells"][...].astype(np.int64)
-        steps = []
-        for key in sorted(f["steps"]):
-            g = f["steps"][key]
-            steps.append((int(g.attrs["step"]), float(g.attrs["time"]), g["displacement"][...],
-                          g["horizontal_strain"][...], g["angular_distortion"][...]))
-    return points, tris, steps
-
-
 def surface_maps(run_dir: str, ctx: GisContext, out: str) -> list[str]:
     """The land surface's maps: surface_maps.nc (every output time) and the GeoTIFFs of the last."""
-    points, tris, steps = _surface_steps(run_dir)
+    points, tris, steps = read_surface_steps(run_dir)
     xy = points[:, :2] + ctx.origin[:2]
     pm = pixel_map(xy, tris, ctx.spacing)
     corners = tris[pm.triangle]
@@ -178,7 +144,6 @@ def surface_maps(run_dir: str, ctx: GisContext, out: str) -> list[str]:
 def _tags(long: str, unit: str, t: float, ctx: GisContext) -> dict:
     tags = {"long_name": long, "units": unit, "time_s": repr(float(t))}
     if ctx.start is not None:
-        from ..georef import dates
         tags["date"] = dates(ctx.start, t)[0].isoformat()
     return tags
 
@@ -187,7 +152,6 @@ def write_maps_netcdf(path: str, x: np.ndarray, y: np.ndarray, times: np.ndarray
                       ctx: GisContext) -> str:
     """CF-1.8 NetCDF-4 of maps (time, y, x) with the grid mapping ``spatial_ref`` of the run's CRS."""
     import h5netcdf
-    from ..georef import cf_time_units
     tmp = path + ".tmp"
     with h5netcdf.File(tmp, "w") as nc:
         nc.attrs.update({"Conventions": "CF-1.8", "title": "maps of the land surface (pfault)"})
@@ -209,18 +173,8 @@ def write_maps_netcdf(path: str, x: np.ndarray, y: np.ndarray, times: np.ndarray
     return path
 
 
-def add_grid_mapping(nc: Any, crs: Any, name: str = "spatial_ref") -> None:
-    """The CF grid-mapping variable ``name`` of ``crs`` in an open h5netcdf file (a scalar int holding the CRS in
-    its attributes; pfault.georef.cf_grid_mapping)."""
-    from ..georef import cf_grid_mapping
-    v = nc.create_variable(name, (), np.int32, data=np.int32(0))
-    v.attrs.update(cf_grid_mapping(crs))
-
-
 def los_geotiffs(run_dir: str, ctx: GisContext, out: str) -> list[str]:
     """insar_los.tif and insar_los_velocity.tif: the LOS raster's last output time, in the raster's CRS."""
-    from ..georef import crs_from_cf
-    from .insar import read_netcdf
     path = os.path.join(run_dir, "insar_los.nc")
     if not os.path.exists(path):
         return []
@@ -268,7 +222,6 @@ def trace_layers(run_dir: str, ctx: GisContext) -> list[Layer]:
     sub = {k: np.asarray(v)[formed] for k, v in attrs.items() if k not in ("state", "broken")}
     sub["break_time_s"] = when[formed]
     if ctx.start is not None:
-        from ..georef import dates
         sub["break_date"] = np.array([d.date().isoformat() for d in dates(ctx.start, when[formed])], dtype=object)
     layers.append(Layer("fissure_traces", "LINESTRING", list(xy[formed]), sub,
                         "edges on the land surface of the fault faces that broke (fissures that reached it)"))
@@ -300,8 +253,7 @@ def _rings(triangles: np.ndarray, xy: np.ndarray) -> list[np.ndarray]:
 def hazard_layer(run_dir: str, ctx: GisContext) -> list[Layer]:
     """hazard_zones: per edge-connected zone of triangles whose horizontal strain exceeds the threshold at the
     last output time, its outline (holes included), area and peak strain."""
-    from .hazard import _zones
-    points, tris, steps = _surface_steps(run_dir)
+    points, tris, steps = read_surface_steps(run_dir)
     _, t, _, strain, _ = steps[-1]
     prone = strain > ctx.threshold
     xy = points[:, :2] + ctx.origin[:2]
@@ -322,41 +274,26 @@ def hazard_layer(run_dir: str, ctx: GisContext) -> list[Layer]:
 
 
 # -- stations -------------------------------------------------------------------------------------------------------
-def read_stations_csv(run_dir: str) -> tuple[list, dict]:
-    """station_displacement.csv: the station names in order and per station (times (nt,), u (nt, 3))."""
-    rows: dict = {}
-    with open(os.path.join(run_dir, "station_displacement.csv"), newline="") as fh:
-        for r in csv.DictReader(fh):
-            rows.setdefault(r["name"], {})[float(r["time_s"])] = [float(r[k]) for k in ("ux_m", "uy_m", "uz_m")]
-    out = {}
-    for name, by_time in rows.items():
-        t = np.array(sorted(by_time))
-        out[name] = (t, np.array([by_time[x] for x in t]))
-    return list(rows), out
-
-
 def station_outputs(run_dir: str, ctx: GisContext, out: str) -> tuple[list[str], list[Layer]]:
     """stations_enu.csv and the stations layer (geodetic east/north/up in mm; pfault.georef.true_east_north)."""
-    from ..georef import Transform, dates, decimal_year, true_east_north
     h5 = os.path.join(run_dir, "station_displacement.h5")
     if not os.path.exists(h5):
         return [], []
     with open_h5(h5, "r") as f:
         names = [s.decode() for s in f["stations"][()]]
         xyz = f["geometry/vertices"][()]
-    _, series = read_stations_csv(run_dir)
+    series = read_station_series(run_dir)
     east, north = true_east_north(ctx.crs, xyz[:, 0], xyz[:, 1])
     lon, lat = Transform(ctx.crs, ctx.crs.geodetic_crs)(xyz[:, 0], xyz[:, 1])
     lines = ["station,date,decimal_year,time_s,east_mm,north_mm,up_mm\n"]
     last = []
     for i, name in enumerate(names):
-        t, u = series[name]
+        t, u = series[name].time, series[name].u
         enu = np.column_stack([u[:, :2] @ east[i], u[:, :2] @ north[i], u[:, 2]]) * 1e3
         when = dates(ctx.start, t) if ctx.start is not None else [None] * len(t)
         lines += [f"{name},{d.date().isoformat() if d else ''},{f'{decimal_year(d):.6f}' if d else ''},"
                   f"{s!r},{e:.4f},{n:.4f},{v:.4f}\n" for d, s, (e, n, v) in zip(when, t.tolist(), enu)]
         last.append(enu[-1])
-    from .output import replace_text
     path = os.path.join(out, "stations_enu.csv")
     replace_text(path, "".join(lines))
     last = np.array(last).reshape(-1, 3)
@@ -387,17 +324,17 @@ def write_gis(run_dir: str) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m pfault.io.gis RUN_DIR``: (re)write the run's GIS layers."""
+    """``python -m pfault.post.gis RUN_DIR``: (re)write the run's GIS layers."""
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 1 or not os.path.isdir(args[0]):
-        sys.stderr.write("usage: python -m pfault.io.gis RUN_DIR  (a run written with -pfault_crs)\n")
+        sys.stderr.write("usage: python -m pfault.post.gis RUN_DIR  (a run written with -pfault_crs)\n")
         return 2
     written = write_gis(args[0])
     if not written:
-        sys.stderr.write(f"pfault.io.gis: error: {args[0]}: the run has no CRS (summary.json georef); run the scene "
+        sys.stderr.write(f"pfault.post.gis: error: {args[0]}: the run has no CRS (summary.json georef); run the scene "
                          "with -pfault_crs\n")
         return 1
-    print(f"pfault.io.gis: {len(written)} files in {os.path.join(args[0], DIR)}")
+    print(f"pfault.post.gis: {len(written)} files in {os.path.join(args[0], DIR)}")
     return 0
 
 

@@ -11,7 +11,7 @@ run whose faults have no strength) has no fissure figure, and its hazard map is 
   surface, its length along the land-surface trace, its broken area, the largest opening of its broken faces,
   the time of the first break and the time the fissure reached the land surface; below them, the fissures' depth,
   surface length and largest opening against time (``history``);
-- on ``hazard_map.png`` (pfault.io.figures.hazard_figure, ``draw_surface_traces``): the traces on the land
+- on ``hazard_map.png`` (pfault.post.figures.hazard_figure, ``draw_surface_traces``): the traces on the land
   surface of the fissures that reached it: the edges of broken faces whose two vertices lie on the land surface.
 
 The land surface is that of surface.h5 (``-pfault_ground_surface``: a vertex of the fault is on it when a point of
@@ -27,7 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from . import figures as fg
+from ..io.output import open_h5
+from ..units import YEAR
+from .meshes import face_geometry, plane_axes
+from .plots import pyplot, save, scene_name, title_time
+from .rundir import read_options, read_summary
 
 FIGURE = "fissure_break.png"
 # summary.json's per-fault keys of the fissure (written by the run that broke the faces)
@@ -57,7 +61,6 @@ def read_breaks(run_dir: str, step: int = -1, time: float | None = None) -> Brea
     path = os.path.join(run_dir, "fault.h5")
     if not os.path.exists(path):
         return None
-    from .output import open_h5
     with open_h5(path, "r") as f:
         groups = [f["steps"][k] for k in sorted(f.get("steps", {}))]
         if not groups:
@@ -85,7 +88,6 @@ def on_land_surface(run_dir: str, points: np.ndarray) -> np.ndarray:
     else those on the plane z = max z."""
     path = os.path.join(run_dir, "surface.h5")
     if os.path.exists(path):
-        from .output import open_h5
         with open_h5(path, "r") as f:
             surf = f["mesh/points"][...]
         keys = np.concatenate([surf, points])
@@ -107,7 +109,7 @@ def fissure_measures(b: Breaks, on_surface: np.ndarray, names: list[str]) -> dic
     """Per fault with broken faces (by name): broken area (m^2), depth of its deepest broken vertex below the land
     surface (m), length of its trace on the land surface (m), largest opening of a broken face (m), time of the
     first break and time it reached the land surface (s; NaN when it has not)."""
-    _, area, _ = fg.face_geometry(b.points, b.faces)
+    _, area, _ = face_geometry(b.points, b.faces)
     ztop = float(b.points[on_surface, 2].max()) if on_surface.any() else float(b.points[:, 2].max())
     edges, edge_face = surface_edges(b.faces, b.broken, on_surface)
     seg = np.linalg.norm(b.points[edges[:, 1]] - b.points[edges[:, 0]], axis=1)
@@ -129,11 +131,11 @@ def fault_names(run_dir: str) -> list[str]:
     """The faults' names in the order of their index (summary.json's ``faults``, else options.txt's
     ``-pfault_faults``)."""
     try:
-        names = list(fg.read_summary(run_dir).get("faults", {}))
+        names = list((read_summary(run_dir) or {}).get("faults", {}))
     except (OSError, ValueError):
         names = []
     if not names:
-        names = [n.strip() for n in fg.read_options(run_dir).get("pfault_faults", "").split(",") if n.strip()]
+        names = [n.strip() for n in read_options(run_dir).get("pfault_faults", "").split(",") if n.strip()]
     return names
 
 
@@ -144,7 +146,7 @@ def measures(run_dir: str, b: Breaks) -> dict[str, dict[str, float]]:
     out = fissure_measures(b, on_land_surface(run_dir, b.points), names)
     if b.index == b.num_steps - 1:
         try:
-            faults = fg.read_summary(run_dir).get("faults", {})
+            faults = (read_summary(run_dir) or {}).get("faults", {})
         except (OSError, ValueError):
             faults = {}
         for name, m in out.items():
@@ -153,7 +155,7 @@ def measures(run_dir: str, b: Breaks) -> dict[str, dict[str, float]]:
 
 
 def _years(t: float) -> str:
-    return "not yet" if not np.isfinite(t) else f"t = {t / fg.YEAR:.3g} years"
+    return "not yet" if not np.isfinite(t) else f"t = {t / YEAR:.3g} years"
 
 
 def _label(m: dict[str, float]) -> str:
@@ -169,14 +171,14 @@ def _fault_panel(fig: Any, ax: Any, b: Breaks, mine: np.ndarray, name: str, m: d
     from matplotlib.colors import ListedColormap
     from matplotlib.tri import Triangulation
     faces = b.faces[mine]
-    normals, _, _ = fg.face_geometry(b.points, faces)
-    axis, (ia, ib) = fg.plane_axes(normals)
+    normals, _, _ = face_geometry(b.points, faces)
+    axis, (ia, ib) = plane_axes(normals)
     tri = Triangulation(b.points[:, ia], b.points[:, ib], faces)
     broken = b.broken[mine]
     if (~broken).any():
         tri.set_mask(broken)
         ax.tripcolor(tri, facecolors=np.zeros(len(faces)), cmap=ListedColormap(["0.82"]), edgecolors="none")
-    years = np.where(broken, b.break_time[mine], 0.0) / fg.YEAR
+    years = np.where(broken, b.break_time[mine], 0.0) / YEAR
     tri = Triangulation(b.points[:, ia], b.points[:, ib], faces, mask=~broken)
     lo, hi = float(years[broken].min()), float(years[broken].max())
     pc = ax.tripcolor(tri, facecolors=years, cmap="plasma_r", vmin=lo, vmax=max(hi, lo + 1e-9), edgecolors="none")
@@ -184,7 +186,7 @@ def _fault_panel(fig: Any, ax: Any, b: Breaks, mine: np.ndarray, name: str, m: d
     names = "xyz"
     plane = float(np.median(b.points[faces, axis]))
     ax.set_title(f"{name}: {int(broken.sum())} of {len(faces)} faces broken (grey: intact), "
-                 f"{fg._title_time(b.time)}", fontsize=10)
+                 f"{title_time(b.time)}", fontsize=10)
     ax.text(0.01, 0.03, _label(m), transform=ax.transAxes, fontsize=8.5, va="bottom",
             bbox=dict(boxstyle="round", fc="white", alpha=0.85))
     ax.set_xlabel(f"{names[ia]} (m), along the fault plane {names[axis]} = {plane:g} m")
@@ -222,7 +224,7 @@ def _history_panels(fig: Any, spec: Any, hist: dict[str, dict[str, np.ndarray]])
     for i, (key, scale, label) in enumerate(panels):
         ax = fig.add_subplot(grid[0, i])
         for name, h in hist.items():
-            ax.plot(h["time_s"] / fg.YEAR, scale * h[key], "o-", ms=3, label=name)
+            ax.plot(h["time_s"] / YEAR, scale * h[key], "o-", ms=3, label=name)
         ax.set_xlabel("time (years)")
         ax.set_title(label, fontsize=10)
         ax.set_ylim(bottom=0.0)
@@ -238,7 +240,7 @@ def fissure_figure(run_dir: str, out: str | None = None, step: int = -1) -> str 
     b = read_breaks(run_dir, step)
     if b is None or not b.broken.any():
         return None
-    plt = fg._pyplot()
+    plt = pyplot()
     names = fault_names(run_dir)
     m = measures(run_dir, b)
     ids = [int(k) for k in np.unique(b.fault[b.broken])]
@@ -248,8 +250,8 @@ def fissure_figure(run_dir: str, out: str | None = None, step: int = -1) -> str 
         name = names[k] if k < len(names) else f"fault {k}"
         _fault_panel(fig, fig.add_subplot(grid[row, 0]), b, b.fault == k, name, m[name])
     _history_panels(fig, grid[len(ids), 0], history(run_dir, b.index))
-    fig.suptitle(f"{fg._scene(run_dir)}: fissures formed (broken faces of the candidate surfaces)")
-    return fg._save(fig, out or os.path.join(run_dir, FIGURE))
+    fig.suptitle(f"{scene_name(run_dir)}: fissures formed (broken faces of the candidate surfaces)")
+    return save(fig, out or os.path.join(run_dir, FIGURE))
 
 
 def draw_surface_traces(ax: Any, run_dir: str, t: float, km: float) -> float:

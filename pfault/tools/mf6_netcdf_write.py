@@ -1,12 +1,13 @@
 """MODFLOW 6 NetCDF head files written with xarray as MODFLOW 6 writes them (its NetCDF output: src/Utilities/Export
 DisNCStructured.f90 and MeshNCModel.f90, CF-1.11 / UGRID-1.0), for tests and examples where MODFLOW 6 itself is not at
-hand (as pfault.io.mf6_write is for the binary files): a structured file (time, z, y, x) and a UGRID layered mesh
+hand (as pfault.tools.mf6_write is for the binary files): a structured file (time, z, y, x) and a UGRID layered mesh
 (head_l1 ... per layer), with the DIS package's TOP and BOTM exported (EXPORT_ARRAY_NETCDF) or not, and a CRS in the
-grid-mapping variable ``projection``. xarray (the tests' extra) is imported when a file is written."""
+grid-mapping variable ``projection``. Needs xarray (the tests' extra)."""
 
 from typing import Any
 
 import numpy as np
+import xarray as xr
 
 GLOBAL = {"title": "col hydraulic head", "source": "MODFLOW 6 6.6.0", "modflow_model": "col: MODFLOW 6 Groundwater "
           "Flow (GWF) model", "history": "first created 2025/1/1 0:0:0.0"}
@@ -16,7 +17,6 @@ HNOFLO = 1e30
 
 
 def _projection(crs: Any, key: str) -> Any:
-    import xarray as xr
     return xr.DataArray(np.int32(1), attrs={key: crs.to_wkt()})
 
 
@@ -25,7 +25,6 @@ def structured(path: str, times: Any, heads: Any, xorigin: float, yorigin: float
     """heads (nt, nlay, nrow, ncol), rows from the north as MODFLOW numbers them; top (nrow, ncol), botm (nlay,
     nrow, ncol) exported when given. ``flip_y``: y increasing (rows from the south), as a file turned round would
     have it."""
-    import xarray as xr
     delr, delc = np.asarray(delr, float), np.asarray(delc, float)
     xe = xorigin + np.concatenate([[0.0], np.cumsum(delr)])
     ye = yorigin + np.sum(delc) - np.concatenate([[0.0], np.cumsum(delc)])       # north edge first
@@ -63,7 +62,6 @@ def mesh(path: str, times: Any, heads: Any, vertices: Any, faces: Any, top: Any 
     """A UGRID layered mesh: vertices (nvert, 2) in world coordinates, faces (per cell its vertex numbers, 0-based,
     counter-clockwise), heads (nt, nlay, ncpl); top (ncpl,), botm (nlay, ncpl) exported when given; ``time_units``
     (default days since 1970-01-01, MODFLOW's without a start date)."""
-    import xarray as xr
     width = max(len(f) for f in faces)
     fill = np.int32(-2147483647)
     face_nodes = np.full((len(faces), width), fill, np.int32)

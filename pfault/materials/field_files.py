@@ -29,6 +29,7 @@ import os
 import re
 from dataclasses import dataclass
 
+import h5py
 import numpy as np
 
 from ..errors import InputError
@@ -134,7 +135,6 @@ def _coordinate_names(names: list[str], where: str, kind: str) -> list[str]:
 
 
 def _read_hdf5(path, where, variable, default_variable):
-    import h5py
     try:
         h5 = h5py.File(path, "r", locking=False)
     except OSError as exc:

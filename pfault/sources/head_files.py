@@ -16,13 +16,15 @@ from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+import h5py
 import numpy as np
 
 from ..errors import InputError
 from ..paths import file_problem
-from ..sources import lookup
+from ..units import parse_quantity
+from . import lookup
 
 
 # what to do about a head file that ends inside a record
@@ -158,7 +160,6 @@ def scaled(grid: Mf6Grid, length: float) -> Mf6Grid:
     """The grid in metres when its lengths are in units of ``length`` m (feet: 0.3048)."""
     if length == 1.0:
         return grid
-    from dataclasses import replace
     return replace(grid, top=grid.top * length, botm=grid.botm * length, xorigin=grid.xorigin * length,
                    yorigin=grid.yorigin * length,
                    delr=None if grid.delr is None else grid.delr * length,
@@ -248,7 +249,6 @@ class TableHeads:
 
     def __init__(self, path: str) -> None:
         _need(path, "pfault_heads_file")
-        import h5py
         self.path = path
         try:
             self.file = h5py.File(path, "r")
@@ -331,7 +331,6 @@ def _unit_seconds(units, path: str) -> float | None:
     word = str(units).split(" since ")[0].strip().lower()
     word = {"seconds": "s", "second": "s", "sec": "s", "days": "day", "years": "year", "hours": "hour",
             "minutes": "minute", "d": "day"}.get(word, word)
-    from ..units import parse_quantity
     try:
         return parse_quantity(f"1*{word}", "time units", "s")
     except InputError:

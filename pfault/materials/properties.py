@@ -6,7 +6,7 @@ names a field, as PyLith's spatial databases do::
     -pfault_material_clay_young_modulus field:config/site_example/clay_modulus.csv
     -pfault_material_clay_young_modulus field:maps/clay.nc,variable=E,outside=nearest
 
-The file (pfault.io.field_files: CSV, HDF5 or NetCDF; points or a regular grid in x, y and/or z) holds the
+The file (pfault.materials.field_files: CSV, HDF5 or NetCDF; points or a regular grid in x, y and/or z) holds the
 value in the option's unit unless it states its own. A grid is interpolated (multi)linearly, scattered points
 linearly over their Delaunay triangulation (scipy.interpolate), at the centroids of the material's cells in
 site coordinates (mesh + ``-pfault_mesh_origin``, pfault.io.probes.mesh_to_site). A centroid outside the grid or
@@ -27,9 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError
-from .io.probes import mesh_to_site
-from .paths import beside_scene
+from ..errors import InputError
+from ..io.probes import mesh_to_site
+from ..paths import beside_scene
+from ..physics import flow as fl
+from .field_files import read_field
 
 FIELD_PREFIX = "field:"
 OUTSIDE = ("error", "nearest")
@@ -90,7 +92,7 @@ def property_name(option: str) -> str:
 
 # -- evaluation at points ----------------------------------------------------------------------------------
 def interpolate(field: Any, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Values of ``field`` (pfault.io.field_files.SpatialField) at ``points`` (n, 3) in site coordinates, and
+    """Values of ``field`` (pfault.materials.field_files.SpatialField) at ``points`` (n, 3) in site coordinates, and
     the points outside the field (a grid's box, the points' convex hull) as a mask; their values are the
     nearest ones (the grid's value at the nearest point of its box, the nearest point's value)."""
     from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator, RegularGridInterpolator
@@ -143,7 +145,6 @@ def check_range(ref: FieldRef, field: Any) -> None:
 def read_fields(refs: Sequence[FieldRef], scene_file: str, notes: list | None = None) -> dict[str, Any]:
     """{option: SpatialField} of the field options, read and checked (rank 0); the files' notes (points that
     look like a grid and are not one) are appended to ``notes``."""
-    from .io.field_files import read_field
     out = {}
     for ref in refs:
         prop = property_name(ref.option)
@@ -218,7 +219,6 @@ def flow_cell_properties(flow: Any, props: CellProperties, cell_material: np.nda
                          water_density: float, gravity: float) -> tuple[np.ndarray, np.ndarray]:
     """Hydraulic conductivity (m/s) and specific storage (1/m) per cell of the flow model's settings ``flow``;
     a storage left to its default is the skeleton's (pfault.physics.flow.specific_storage) of each cell."""
-    from .physics import flow as fl
     k = per_cell(flow.conductivity, cell_material, field_values, cell_ids)
     ss = per_cell(flow.storage, cell_material, field_values, cell_ids)
     default = np.array([v is None for v in flow.storage])[cell_material]

@@ -18,7 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from . import figures as fg
+from ..io.output import open_h5
+from .fissures import fault_names
+from .meshes import face_geometry
+from .plots import pyplot, save, scene_name, title_time
+from .rundir import read_summary
 
 FIGURE = "fault_margins.png"
 MODES = ("slip", "open", "break")
@@ -43,7 +47,6 @@ def read_margins(run_dir: str, step: int = -1) -> MarginSnapshot | None:
     path = os.path.join(run_dir, "fault.h5")
     if not os.path.exists(path):
         return None
-    from .output import open_h5
     with open_h5(path, "r") as f:
         keys = sorted(f.get("steps", {}))
         if not keys:
@@ -63,7 +66,7 @@ def read_margins(run_dir: str, step: int = -1) -> MarginSnapshot | None:
 def thresholds(run_dir: str) -> tuple:
     """The drawdowns (m) of the run's margin bands: the keys of a step record's ``area_within_m2``."""
     try:
-        steps = fg.read_summary(run_dir).get("steps", [])
+        steps = read_summary(run_dir).get("steps", [])
     except (OSError, ValueError):
         steps = []
     for rec in steps:
@@ -80,17 +83,16 @@ def margin_figure(run_dir: str, out: str | None = None, step: int = -1) -> str |
     snap = read_margins(run_dir, step)
     if snap is None:
         return None
-    plt = fg._pyplot()
-    from .fissures import fault_names
+    plt = pyplot()
     names = fault_names(run_dir)
     ids = [int(k) for k in np.unique(snap.fault)]
     fig, axs = plt.subplots(len(ids), 1, figsize=(11, 3.8 * len(ids) + 0.6), constrained_layout=True, squeeze=False)
     bands = thresholds(run_dir)
     for ax, k in zip(axs[:, 0], ids):
         _panel(fig, ax, snap, snap.fault == k, names[k] if k < len(names) else f"fault {k}", bands)
-    fig.suptitle(f"{fg._scene(run_dir)}: margins to failure, further drawdown of the loaded materials (m of head), "
-                 f"{fg._title_time(snap.time)}")
-    return fg._save(fig, out or os.path.join(run_dir, FIGURE))
+    fig.suptitle(f"{scene_name(run_dir)}: margins to failure, further drawdown of the loaded materials (m of head), "
+                 f"{title_time(snap.time)}")
+    return save(fig, out or os.path.join(run_dir, FIGURE))
 
 
 def _bands(margin: np.ndarray, bands: tuple) -> np.ndarray:
@@ -120,7 +122,7 @@ def _panel(fig: Any, ax: Any, snap: MarginSnapshot, mine: np.ndarray, name: str,
     from matplotlib.tri import Triangulation
     faces = snap.faces[mine]
     margin, mode = snap.margin[mine], snap.mode[mine]
-    normals, area, centroids = fg.face_geometry(snap.points, faces)
+    normals, area, centroids = face_geometry(snap.points, faces)
     u, v, xlabel, ylabel = plane_coordinates(snap.points, normals)
     tri = Triangulation(u, v, faces)
     nb = len(bands)

@@ -2,7 +2,7 @@
 (``.hds``), in the layouts of the MODFLOW 6 input/output guide (appendix "Binary grid file" and "Binary output
 files"), as MODFLOW 6 writes them (Fortran stream access, little endian, double precision, no record markers).
 
-pfault reads such files with flopy (pfault.io.head_files); this writer makes test and example files where MODFLOW
+pfault reads such files with flopy (pfault.sources.head_files); this writer makes test and example files where MODFLOW
 6 itself is not at hand. Layer 1 is the top layer; arrays are given in MODFLOW's order (layer, row, column) or
 (layer, cell2d), 0-based here, 1-based in the file where MODFLOW counts from 1 (IA, JA, IAVERT, JAVERT).
 """

@@ -30,9 +30,11 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+import h5py
 import numpy as np
 
 from ..errors import InputError
+from ..georef import crs_from_cf
 from ..paths import file_problem
 
 UTC = dt.timezone.utc
@@ -93,7 +95,6 @@ def _increasing(axis: np.ndarray, name: str, where: str) -> bool:
 
 def read_insar_product(path: str, with_values: bool = True, option: str = "--insar") -> InsarProduct:
     """The product at ``path`` (module docstring); ``with_values`` False reads its grid, CRS and LOS only."""
-    import h5py
     where = f"{option} {path}"
     problem = file_problem(path)
     if problem:
@@ -113,7 +114,6 @@ def read_insar_product(path: str, with_values: bool = True, option: str = "--ins
 
 
 def _opera(f: Any, path: str, where: str, with_values: bool) -> InsarProduct:
-    from ..georef import crs_from_cf
     var = f["displacement"]
     x, y = np.asarray(f["x"][()], float), np.asarray(f["y"][()], float)
     if var.ndim != 3 or var.shape[1:] != (len(y), len(x)):

@@ -2,7 +2,7 @@
 
 A run writes them at its end (``-pfault_figures``, default true; pfault.simulation), and
 
-    python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]
+    python -m pfault.post.figures RUN_DIR [RUN_DIR ...] [--step K]
 
 writes them into any RUN_DIR (an interrupted run's too):
 
@@ -17,12 +17,12 @@ writes them into any RUN_DIR (an interrupted run's too):
   (like Figs 4 and 7);
 - ``histories.png``: maximum subsidence, opening, slip (and drawdown) against time from summary.json, with
   the Newton iterations and factorisations per step;
-- ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.io.hazard): largest
+- ``hazard_map.png``: the earth-fissure hazard fields of the land surface (pfault.hazard): largest
   horizontal principal strain and angular distortion, with the fault traces and the maxima marked, and the traces
-  of the fissures that formed and reached the land surface (pfault.io.fissures);
-- ``fissure_break.png`` (faults with a tensile strength that broke, pfault.io.fissures): each fault's broken
+  of the fissures that formed and reached the land surface (pfault.post.fissures);
+- ``fissure_break.png`` (faults with a tensile strength that broke, pfault.post.fissures): each fault's broken
   faces coloured by the year they broke, intact faces grey, with the fissure's depth, length and first break;
-- ``fault_margins.png`` (faults with margins to failure, pfault.io.margin_map): each fault's faces banded by their
+- ``fault_margins.png`` (faults with margins to failure, pfault.post.margin_map): each fault's faces banded by their
   margin (m of further drawdown: failed now, within each of the run's thresholds, beyond, never), the smallest
   starred;
 - ``insar_los.png`` (``-pfault_insar_los``): the LOS raster's displacement and velocity at its last time
@@ -30,181 +30,38 @@ writes them into any RUN_DIR (an interrupted run's too):
 
 Each PNG is written whole into ``NAME.png.tmp`` and renamed over the old one.
 
-``K`` is the index of the output time (default -1: the last one). The readers below (``read_summary``,
-``read_fields``, ``read_fault``, ``top_surface``, ...) are also used by the case studies (studies/casestudies.py)
-and the tests; they read the files pfault.io.output writes and need meshio only.
-
-Sign conventions (pfault.mesh.fault): a fault triangle's vertex order gives the normal (x1-x0)x(x2-x0) from
-the minus to the plus side; jumps are plus minus minus; opening is the normal jump (positive: open); the
-dip slip is the slip component along the up-dip direction of the plane (positive: the plus side moves up
-relative to the minus side).
+``K`` is the index of the output time (default -1: the last one). The figures read the run directory through
+pfault.post.rundir and measure its meshes with pfault.post.meshes (whose sign conventions they follow).
 """
 
 from __future__ import annotations
 
-import json
+import argparse
 import os
-from dataclasses import dataclass, field
+import sys
 from typing import Any
 
 import numpy as np
 
-YEAR = 365.25 * 86400.0
-TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+from ..hazard import same_place
+from ..io.insar import NC_NAME, read_netcdf
+from ..units import YEAR, format_time
+from .fissures import draw_surface_traces, fissure_figure
+from .margin_map import margin_figure
+from .meshes import dip_slip, face_geometry, plane_axes, top_surface
+from .plots import pyplot, save, scene_name, title_time
+from .rundir import SUMMARY, has_fault, has_surface, read_fault, read_fields, read_options, read_summary, read_surface
+
 FIGURES = ("fault_opening_slip.png", "subsidence_map.png", "histories.png", "hazard_map.png")
+INSAR_FIGURE = "insar_los.png"
 
 
-# ------------------------------------------------------------------------------------------------------
-# reading a run directory
-# ------------------------------------------------------------------------------------------------------
-@dataclass
-class Snapshot:
-    """One output time of fields.xdmf (tetrahedra) or fault.xdmf (triangles)."""
-    points: np.ndarray
-    cells: np.ndarray
-    time: float
-    point_data: dict = field(default_factory=dict)
-    cell_data: dict = field(default_factory=dict)
-    num_steps: int = 0
-
-
-def read_summary(run_dir: str) -> dict[str, Any]:
-    with open(os.path.join(run_dir, "summary.json")) as fh:
-        return json.load(fh)
-
-
-def read_options(run_dir: str) -> dict[str, str]:
-    """The resolved options of a run (options.txt) as {name without '-': value string ('' for flags)}."""
-    out: dict[str, str] = {}
-    path = os.path.join(run_dir, "options.txt")
-    if not os.path.exists(path):
-        return out
-    with open(path) as fh:
-        for line in fh:
-            line = line.strip()
-            if not line.startswith("-"):
-                continue
-            key, _, value = line[1:].partition(" ")
-            out[key] = value.strip()
-    return out
-
-
-def read_materials(run_dir: str) -> dict[int, str]:
-    """{material id: name} from materials.json."""
-    with open(os.path.join(run_dir, "materials.json")) as fh:
-        return {int(k): v for k, v in json.load(fh).items()}
-
-
-def _read_series(path, step, cell_type):
-    import meshio
-    with meshio.xdmf.TimeSeriesReader(path) as reader:
-        points, blocks = reader.read_points_cells()
-        n = reader.num_steps
-        if not -n <= step < n:
-            raise IndexError(f"{path}: output time {step} out of range ({n} times written)")
-        t, point_data, cell_data = reader.read_data(step % n)
-    cells = np.concatenate([b.data for b in blocks if b.type == cell_type])
-    cell_data = {k: np.concatenate(v) for k, v in cell_data.items()}
-    return Snapshot(np.asarray(points), np.asarray(cells, dtype=np.int64), float(t),
-                    {k: np.asarray(v) for k, v in point_data.items()}, cell_data, n)
-
-
-def read_fields(run_dir: str, step: int = -1) -> Snapshot:
-    """Mesh (a split fault vertex appears once per piece of its star; each cell uses its pieces' copies) and
-    fields at one time:
-    point data ``displacement`` (m, relative to the initial state), ``head_change`` (m, flow scenes); cell data
-    ``material``, ``pore_pressure_change`` (Pa), ``stress`` (Pa)."""
-    return _read_series(os.path.join(run_dir, "fields.xdmf"), step, "tetra")
-
-
-def read_fault(run_dir: str, step: int = -1) -> Snapshot:
-    """Fault triangles (on the serial points, i.e. the minus-side vertices) and per-face fields at one time:
-    ``opening`` (m), ``slip`` (m, 3 components), ``slip_magnitude`` (m), ``traction_normal`` (Pa),
-    ``traction_shear`` (Pa), ``state`` (stick/slip/open code), ``slid`` (1: slipping or open at the end of a
-    completed step, now or before), ``fault`` (fault index)."""
-    return _read_series(os.path.join(run_dir, "fault.xdmf"), step, "triangle")
-
-
-def has_fault(run_dir: str) -> bool:
-    return os.path.exists(os.path.join(run_dir, "fault.xdmf"))
-
-
-def top_surface(points: np.ndarray, tets: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
-    """Triangles (k, 3) of the mesh faces lying on the plane z = max z (the land surface)."""
-    z = points[:, 2]
-    ztop = z.max()
-    on = np.abs(z - ztop) <= rtol * max(np.ptp(points, axis=0).max(), 1.0)
-    faces = tets[:, TET_FACES].reshape(-1, 3)
-    return faces[on[faces].all(axis=1)]
-
-
-def face_geometry(points: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unit normals (minus -> plus), areas and centroids of triangles."""
-    x = points[tris]
-    cross = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
-    area2 = np.linalg.norm(cross, axis=1)
-    return cross / np.maximum(area2, 1e-300)[:, None], 0.5 * area2, x.mean(axis=1)
-
-
-def plane_axes(normals: np.ndarray) -> tuple[int, tuple[int, ...]]:
-    """Axis index normal to a (near) coordinate-plane fault and the two in-plane axes, e.g. (0, (1, 2)) for
-    a vertical fault x = const: plot it in (y, z)."""
-    a = int(np.argmax(np.abs(normals).mean(axis=0)))
-    return a, tuple(i for i in range(3) if i != a)
-
-
-def dip_slip(slip: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Slip component along the up-dip direction of each face (positive: plus side up relative to minus);
-    for a vertical fault this is the vertical slip u_z(plus) - u_z(minus)."""
-    ez = np.array([0.0, 0.0, 1.0])
-    d = ez[None, :] - normals[:, 2:3] * normals
-    nd = np.linalg.norm(d, axis=1)
-    d = np.where(nd[:, None] > 1e-12, d / np.maximum(nd, 1e-300)[:, None], 0.0)
-    return np.einsum("ij,ij->i", slip, d)
-
-
-def nodal_jumps(fields: Snapshot, fault: Snapshot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Displacement jumps at the split fault vertices (plus copy minus original), from fields.xdmf.
-
-    fields.xdmf holds the serial vertices followed by a copy per further piece of each split vertex (the plus side
-    of a single fault); fault.xdmf holds the serial vertices only, so copies are matched to their originals by their
-    (bitwise equal) coordinates among the fault vertices. Returns (points (k, 3), jump (k, 3), normal (k, 3)),
-    with the normal averaged over the fault faces at each vertex; tips (unsplit) are left out, and so are junction
-    vertices (more than one copy: faults meeting there, no one normal and plus side)."""
-    n_serial = len(fault.points)
-    P = fields.points
-    copies = np.arange(n_serial, len(P))
-    cand = np.unique(fault.cells)
-    keys = np.concatenate([P[cand], P[copies]])
-    _, inv = np.unique(keys, axis=0, return_inverse=True)
-    inv = inv.ravel()
-    first = np.full(inv.max() + 1, -1)
-    first[inv[: len(cand)]] = cand
-    orig = first[inv[len(cand):]]
-    ok = orig >= 0
-    ok[ok] = np.bincount(orig[ok], minlength=n_serial)[orig[ok]] == 1    # junction vertices: several copies
-    copies, orig = copies[ok], orig[ok]
-    u = fields.point_data["displacement"]
-    normals, area, _ = face_geometry(fault.points, fault.cells)
-    vn = np.zeros((n_serial, 3))
-    for k in range(3):
-        np.add.at(vn, fault.cells[:, k], normals * area[:, None])
-    vn = vn[orig]
-    vn /= np.maximum(np.linalg.norm(vn, axis=1), 1e-300)[:, None]
-    return P[orig], u[copies] - u[orig], vn
-
-
-def surface_fault_jumps(fields: Snapshot, fault: Snapshot, rtol: float = 1e-9) -> tuple[float, float]:
-    """Largest nodal opening and slip magnitude (m) of the split fault vertices on the land surface z = max z
-    (the width and offset one would measure across a fissure or scarp in the field)."""
-    p, jump, n = nodal_jumps(fields, fault)
-    ztop = fields.points[:, 2].max()
-    top = np.abs(p[:, 2] - ztop) <= rtol * max(np.ptp(fields.points, axis=0).max(), 1.0)
-    if not np.any(top):
-        return 0.0, 0.0
-    jn = np.einsum("ij,ij->i", jump, n)
-    slip = np.linalg.norm(jump - jn[:, None] * n, axis=1)
-    return float(np.max(jn[top], initial=0.0)), float(np.max(slip[top], initial=0.0))
+def _summary(run_dir: str) -> dict[str, Any]:
+    """summary.json of the run whose figures are drawn (FileNotFoundError when it has none)."""
+    summary = read_summary(run_dir)
+    if summary is None:
+        raise FileNotFoundError(os.path.join(run_dir, SUMMARY))
+    return summary
 
 
 def wells_from_options(options: dict[str, str]) -> np.ndarray:
@@ -220,33 +77,6 @@ def wells_from_options(options: dict[str, str]) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------------
 # figures
 # ------------------------------------------------------------------------------------------------------
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _save(fig, out):
-    """Write a figure whole (temporary file, then os.replace) and close it; returns the path."""
-    import matplotlib.pyplot as plt
-    fig.savefig(out + ".tmp", dpi=110, format="png")
-    plt.close(fig)
-    os.replace(out + ".tmp", out)
-    return out
-
-
-def _title_time(t):
-    return f"t = {t / YEAR:.3g} years"
-
-
-def _scene(run_dir):
-    try:
-        return read_summary(run_dir).get("scene", os.path.basename(os.path.abspath(run_dir)))
-    except (OSError, ValueError):
-        return os.path.basename(os.path.abspath(run_dir))
-
-
 def _binned(s, values, nbins, how):
     """Per-bin reduction ('max' or 'mean') of values over the along-strike coordinate s; NaN in empty bins."""
     edges = np.linspace(s.min(), s.max(), nbins + 1)
@@ -263,7 +93,7 @@ def _binned(s, values, nbins, how):
 
 def fault_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     """Opening and slip over the fault plane(s) at one output time; returns the PNG path."""
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.tri import Triangulation
     snap = read_fault(run_dir, step)
     pts, tris, cd = snap.points, snap.cells, snap.cell_data
@@ -279,7 +109,7 @@ def fault_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     counts = np.bincount(state, minlength=3)
     faces = f"{counts[0]} stuck, {counts[1]} slipping, {counts[2]} open"
     tri = Triangulation(pts[:, ia], pts[:, ib], tris)
-    scene = _scene(run_dir)
+    scene = scene_name(run_dir)
     plane = float(np.median(centroids[:, axis]))
 
     fig, axs = plt.subplots(3, 1, figsize=(11, 9.5), constrained_layout=True,
@@ -291,7 +121,7 @@ def fault_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
         pc = ax.tripcolor(tri, facecolors=val, cmap=cmap, vmin=0.0, vmax=vmax, edgecolors="none")
         cb = fig.colorbar(pc, ax=ax, pad=0.01)
         cb.set_label(label)
-        ax.set_title(f"{scene}: {what}, max {vmax:.3g} cm ({faces}), {_title_time(snap.time)}")
+        ax.set_title(f"{scene}: {what}, max {vmax:.3g} cm ({faces}), {title_time(snap.time)}")
         ax.set_xlabel(f"{names[ia]} (m), along the fault plane {names[axis]} = {plane:g} m")
         ax.set_ylabel(f"{names[ib]} (m, stretched)")
         ax.set_xlim(pts[tris, ia].min(), pts[tris, ia].max())
@@ -314,7 +144,7 @@ def fault_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     ax.legend(loc="best", fontsize=9)
     ax.grid(alpha=0.3)
     out = out or os.path.join(run_dir, FIGURES[0])
-    return _save(fig, out)
+    return save(fig, out)
 
 
 def _fault_trace(run_dir, ztop, rtol=1e-9):
@@ -463,7 +293,7 @@ def _profile(ax, pts, top, sub, y0, trace, wells, km):
 def subsidence_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     """Land subsidence map (and the drawdown map of flow scenes) at one output time, with a subsidence profile
     along x through the point of largest subsidence; returns the PNG path."""
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.tri import Triangulation
     snap = read_fields(run_dir, step)
     pts, tets = snap.points, snap.cells
@@ -487,25 +317,25 @@ def subsidence_figure(run_dir: str, out: str | None = None, step: int = -1) -> s
     cb.set_label("subsidence -u_z (m)")
     y0 = float(pts[imax, 1])
     ax.axhline(y0 * km, color="tab:blue", lw=0.8, ls=":", label="profile")
-    ax.set_title(f"{_scene(run_dir)}: land subsidence, max {smax:.3g} m\n{_title_time(snap.time)}")
+    ax.set_title(f"{scene_name(run_dir)}: land subsidence, max {smax:.3g} m\n{title_time(snap.time)}")
     _decorate_map(ax, trace, wells, km)
 
     if head is not None:
         ax = fig.add_subplot(gs[0, 1])
         zl, dmax = _drawdown_map(fig, ax, pts, head, km)
         ax.set_title(f"drawdown at z = {zl:g} m (the node layer where it is largest), max {dmax:.3g} m\n"
-                     f"{_title_time(snap.time)}", fontsize=10)
+                     f"{title_time(snap.time)}", fontsize=10)
         _decorate_map(ax, trace, wells, km)
 
     _profile(fig.add_subplot(prof_spec), pts, top, sub, y0, trace, wells, km)
     out = out or os.path.join(run_dir, FIGURES[1])
-    return _save(fig, out)
+    return save(fig, out)
 
 
 def histories_figure(run_dir: str, out: str | None = None) -> str:
     """Maxima against time and solver work per step, from summary.json; returns the PNG path."""
-    plt = _pyplot()
-    summary = read_summary(run_dir)
+    plt = pyplot()
+    summary = _summary(run_dir)
     steps = summary["steps"]
     t = np.array([r["time_s"] for r in steps]) / YEAR
 
@@ -548,27 +378,16 @@ def histories_figure(run_dir: str, out: str | None = None) -> str:
                  f"tetrahedra, {summary['ranks']} rank(s)" + ("" if summary.get("converged", True)
                                                               else " (a step did NOT converge)"))
     out = out or os.path.join(run_dir, FIGURES[2])
-    return _save(fig, out)
-
-
-def read_surface(run_dir: str, step: int = -1) -> Snapshot:
-    """Land-surface triangles and fields at one time: point data ``displacement`` (m), cell data
-    ``horizontal_strain``, ``angular_distortion`` (pfault.io.hazard)."""
-    return _read_series(os.path.join(run_dir, "surface.xdmf"), step, "triangle")
-
-
-def has_surface(run_dir: str) -> bool:
-    return os.path.exists(os.path.join(run_dir, "surface.xdmf"))
+    return save(fig, out)
 
 
 def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     """Earth-fissure hazard map of the land surface at one output time: largest horizontal principal strain
     (the fissure-prone zone outlined) and angular distortion per surface triangle, fault traces dashed, maxima
     marked, and the largest value of each over y against x; returns the PNG path."""
-    plt = _pyplot()
+    plt = pyplot()
     from matplotlib.tri import Triangulation
 
-    from . import fissures
     snap = read_surface(run_dir, step)
     pts, tris, cd = snap.points, snap.cells, snap.cell_data
     trace = _fault_trace(run_dir, pts[:, 2].max())
@@ -596,11 +415,11 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
                 label=f"max {val[i]:.3g} at ({centroids[i, 0]:.0f}, {centroids[i, 1]:.0f}) m")
         if key == "horizontal_strain":
             _fissure_prone_outline(ax, run_dir, pts, tris, val, snap.time, km)
-        fissures.draw_surface_traces(ax, run_dir, snap.time, km)
+        draw_surface_traces(ax, run_dir, snap.time, km)
         ax.set_aspect("equal")
         ax.set_xlabel("x (km)")
         ax.set_ylabel("y (km)")
-        ax.set_title(f"{label.split(' (')[0]}, {_title_time(snap.time)}", fontsize=10)
+        ax.set_title(f"{label.split(' (')[0]}, {title_time(snap.time)}", fontsize=10)
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=8, ncol=1, framealpha=0.85)
     # across the maps: the largest value over y in bins of x
     ax = fig.add_subplot(gs[1, :])
@@ -617,19 +436,18 @@ def hazard_figure(run_dir: str, out: str | None = None, step: int = -1) -> str:
     ax.set_title("profile across the maps (dashed: fault trace)", fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.suptitle(f"{_scene(run_dir)}: earth-fissure hazard of the land surface")
+    fig.suptitle(f"{scene_name(run_dir)}: earth-fissure hazard of the land surface")
     out = out or os.path.join(run_dir, FIGURES[3])
-    return _save(fig, out)
+    return save(fig, out)
 
 
 def _fissure_prone_outline(ax: Any, run_dir: str, pts: np.ndarray, tris: np.ndarray, strain: np.ndarray, t: float,
                            km: float) -> None:
     """The border of the triangles whose strain exceeds summary.json's hazard_strain_threshold, labelled with
-    the fissure-prone length of the step at time t (pfault.io.hazard); nothing for a run without them. A fault's
+    the fissure-prone length of the step at time t (pfault.hazard); nothing for a run without them. A fault's
     trace inside the zone is no border: its two sides' copies of a vertex are one point (hazard.same_place)."""
     from matplotlib.collections import LineCollection
-    from .hazard import same_place
-    summary = read_summary(run_dir)
+    summary = _summary(run_dir)
     threshold = summary.get("hazard_strain_threshold")
     if threshold is None or not np.any(strain > threshold):
         return
@@ -643,16 +461,47 @@ def _fissure_prone_outline(ax: Any, run_dir: str, pts: np.ndarray, tris: np.ndar
                                      label=f"fissure-prone (strain > {threshold:g}){text}"))
 
 
+def insar_figure(run_dir: str) -> str | None:
+    """``insar_los.png``: the last output time's LOS displacement (mm) and velocity (mm/yr); None without a
+    raster."""
+    path = os.path.join(run_dir, NC_NAME)
+    if not os.path.exists(path):
+        return None
+    plt = pyplot()
+    d = read_netcdf(path)
+    dx = d["x"][1] - d["x"][0] if len(d["x"]) > 1 else 1.0
+    dy = d["y"][1] - d["y"][0] if len(d["y"]) > 1 else 1.0
+    extent = (d["x"][0] - dx / 2, d["x"][-1] + dx / 2, d["y"][0] - dy / 2, d["y"][-1] + dy / 2)
+    panel = float(np.clip(4.5 * (extent[1] - extent[0]) / (extent[3] - extent[2]), 2.5, 8.0))    # map's aspect
+    fig, axes = plt.subplots(1, 2, figsize=(2 * panel + 3.0, 4.8), constrained_layout=True)
+    panels = ((d["los_displacement"][-1] * 1e3, "LOS displacement (mm)"),
+              (d["los_velocity"][-1] * 1e3 * YEAR, "LOS velocity (mm/yr, since the previous output)"))
+    for ax, (values, label) in zip(axes, panels):
+        lim = float(np.nanmax(np.abs(values))) if np.isfinite(values).any() else 1.0
+        im = ax.imshow(values, origin="lower", extent=extent, cmap="RdBu_r", vmin=-lim or -1, vmax=lim or 1)
+        fig.colorbar(im, ax=ax, label=label)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_aspect("equal")
+    e, n, u = d["los"] if d["los"].ndim == 1 else d["los"].mean(axis=0)
+    which = "LOS" if d["los"].ndim == 1 else "mean LOS of the product's pixels"
+    fig.suptitle(f"t = {format_time(d['time'][-1]).strip()}; {which} (e, n, u) = ({e:.3f}, {n:.3f}, {u:.3f}), "
+                 "positive towards the satellite")
+    out = os.path.join(run_dir, INSAR_FIGURE)
+    fig.savefig(out + ".tmp", dpi=120, format="png")
+    plt.close(fig)
+    os.replace(out + ".tmp", out)
+    return out
+
+
 def make_figures(run_dir: str, step: int = -1) -> list[str]:
     """All figures of a run directory; returns the paths written."""
-    from .fissures import fissure_figure
     paths = []
     if has_fault(run_dir):
         paths.append(fault_figure(run_dir, step=step))
         broken = fissure_figure(run_dir, step=step)     # faults with a tensile strength that broke
         if broken is not None:
             paths.append(broken)
-        from .margin_map import margin_figure
         margins = margin_figure(run_dir, step=step)     # the faces' margins to failure (-pfault_margins)
         if margins is not None:
             paths.append(margins)
@@ -660,7 +509,6 @@ def make_figures(run_dir: str, step: int = -1) -> list[str]:
     paths.append(histories_figure(run_dir))
     if has_surface(run_dir):
         paths.append(hazard_figure(run_dir, step=step))
-    from .insar import insar_figure
     insar = insar_figure(run_dir)       # the LOS raster's last time (-pfault_insar_los)
     if insar is not None:
         paths.append(insar)
@@ -670,21 +518,18 @@ def make_figures(run_dir: str, step: int = -1) -> list[str]:
 def write_run_figures(run_dir: str) -> list[str]:
     """The figures a finished run writes next to its output (rank 0). A figure that fails is reported, not
     raised: the run's results are on disk already."""
-    import sys
     try:
         return make_figures(run_dir)
     except Exception as exc:          # noqa: BLE001 (plotting must not turn a finished run into a failure)
         sys.stderr.write(f"pfault: warning: figures not written ({type(exc).__name__}: {exc}); "
-                         f"python -m pfault.io.figures {run_dir} makes them\n")
+                         f"python -m pfault.post.figures {run_dir} makes them\n")
         return []
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m pfault.io.figures RUN_DIR [RUN_DIR ...] [--step K]``: the figures of each run directory; exit
+    """``python -m pfault.post.figures RUN_DIR [RUN_DIR ...] [--step K]``: the figures of each run directory; exit
     code 1 when one is not a pfault run directory."""
-    import argparse
-    import sys
-    ap = argparse.ArgumentParser(prog="python -m pfault.io.figures", description=__doc__.splitlines()[0],
+    ap = argparse.ArgumentParser(prog="python -m pfault.post.figures", description=__doc__.splitlines()[0],
                                  epilog=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="a pfault output directory")
     ap.add_argument("--step", type=int, default=-1, help="output time index (default -1: the last)")

@@ -1,5 +1,5 @@
-"""InSAR time series written from NumPy in the layouts pfault.tools.insar_input reads, for tests and examples (as
-pfault.io.mf6_write is for MODFLOW files): OPERA DISP-S1's (NetCDF-4 through h5netcdf: ``displacement`` (time, y, x)
+"""InSAR time series written from NumPy in the layouts pfault.io.insar_input reads, for tests and examples (as
+pfault.tools.mf6_write is for MODFLOW files): OPERA DISP-S1's (NetCDF-4 through h5netcdf: ``displacement`` (time, y, x)
 north first, ``spatial_ref`` with the CRS and GDAL's GeoTransform, CF ``time`` and ``reference_time``, optional
 ``los_east``, ``los_north``) and MintPy's ``timeseries.h5`` (``timeseries``, ``date``, REF_DATE, EPSG, X_FIRST ...)."""
 
@@ -9,7 +9,10 @@ import datetime as dt
 from collections.abc import Sequence
 from typing import Any
 
+import h5py
 import numpy as np
+
+from ..io.rasters import add_grid_mapping
 
 EPOCH = "seconds since 1970-01-01 00:00:00"
 
@@ -24,7 +27,6 @@ def write_opera(path: str, x: np.ndarray, y: np.ndarray, crs: Any, dates: Sequen
     """``values`` (nt, ny, nx) m on increasing pixel centres ``x``, ``y`` (written north first, as GDAL and OPERA
     do), NaN where there is none; ``reference``: one date, or one per date; ``los`` (ny, nx, 3) or None."""
     import h5netcdf
-    from ..io.gis import add_grid_mapping
     values = np.asarray(values, dtype=np.float64)[:, ::-1]
     yd = np.asarray(y, dtype=np.float64)[::-1]
     dx, dy = float(x[1] - x[0]), float(y[1] - y[0])
@@ -56,7 +58,6 @@ def write_opera(path: str, x: np.ndarray, y: np.ndarray, crs: Any, dates: Sequen
 def write_mintpy(path: str, x: np.ndarray, y: np.ndarray, epsg: int, dates: Sequence[dt.datetime],
                  reference: dt.datetime, values: np.ndarray) -> str:
     """MintPy's geocoded timeseries.h5: ``values`` (nt, ny, nx) m on increasing ``x``, ``y``, written north first."""
-    import h5py
     dx, dy = float(x[1] - x[0]), float(y[1] - y[0])
     with h5py.File(path, "w") as f:
         f["timeseries"] = np.asarray(values, dtype=np.float32)[:, ::-1]
