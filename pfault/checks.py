@@ -121,12 +121,13 @@ PIXEL_BYTES_RANK = 250
 
 
 def check_raster_memory(shape: Sequence[float], extent: Sequence[float], spacing: float, default: float,
-                        ranks_on_node: int = 1) -> None:
+                        ranks_on_node: int = 1, memory: float | None = None) -> None:
     """The LOS raster of ``shape`` (nx, ny pixels, floats: a count need not fit an integer) over the land
     surface's ``extent`` (m) at ``spacing`` fits the memory available on rank 0's node, which ``ranks_on_node``
     ranks share; otherwise OutOfMemory naming -pfault_insar_spacing, the pixels and a spacing that fits
-    (``default``: the land surface's mean edge, the option's default). Before anything of it is allocated."""
-    avail = available_memory()
+    (``default``: the land surface's mean edge, the option's default). Before anything of it is allocated.
+    ``memory``: the bytes it may take (None: the memory available on this node, ``available_memory``)."""
+    avail = available_memory() if memory is None else memory
     per_pixel = PIXEL_BYTES_ROOT + PIXEL_BYTES_RANK * (max(int(ranks_on_node), 1) - 1)
     pixels = float(np.prod(shape))
     if avail is None or pixels * per_pixel <= avail:

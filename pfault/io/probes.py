@@ -129,12 +129,13 @@ def ground_faces(serial: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def locate_pixels(serial: Any, ground: str, spacing: float | None,
-                  origin: Sequence[float] = (0.0, 0.0, 0.0), ranks_on_node: int = 1) -> tuple[Raster, Located]:
+                  origin: Sequence[float] = (0.0, 0.0, 0.0), ranks_on_node: int = 1,
+                  memory: float | None = None) -> tuple[Raster, Located]:
     """Rank 0: the raster over the land surface and, for each pixel inside it (in row-major order of
     ``inside``), the tetrahedron under the surface triangle below its centre and the P1 weights there. A centre
     on an edge or a vertex shared by several triangles takes the one of the smallest cell id, as a station does.
     A raster that would not fit in the memory of this node (``ranks_on_node`` ranks on it) is an error before
-    it is made (pfault.checks.check_raster_memory)."""
+    it is made (pfault.checks.check_raster_memory; ``memory``: the bytes it may take, None: what the node has)."""
     cell, lface = ground_faces(serial, ground)
     if not len(cell):
         raise InputError(f"-pfault_insar_los: the mesh has no land surface (-pfault_ground_surface {ground}, nor "
@@ -151,7 +152,8 @@ def locate_pixels(serial: Any, ground: str, spacing: float | None,
     spacing = mean_edge if spacing is None else spacing
     lo, hi = p.min(axis=(0, 1)), p.max(axis=(0, 1))
     with np.errstate(over="ignore"):
-        check_raster_memory(np.ceil((hi - lo) / spacing) + 1, hi - lo, spacing, mean_edge, ranks_on_node)
+        check_raster_memory(np.ceil((hi - lo) / spacing) + 1, hi - lo, spacing, mean_edge, ranks_on_node,
+                            memory)
     first = np.floor(lo / spacing + 1e-9) * spacing
     count = np.maximum(np.ceil((hi - first) / spacing - 1e-9).astype(np.int64), 1)
     x = first[0] + spacing * (np.arange(count[0]) + 0.5)

@@ -107,28 +107,27 @@ def test_a_pixel_on_shared_edges_takes_the_triangle_of_smallest_cell_id():
         assert holds.sum() >= 2 and got == cell[holds].min()
 
 
-def test_a_raster_larger_than_memory_is_refused_before_it_is_made(monkeypatch):
+def test_a_raster_larger_than_memory_is_refused_before_it_is_made():
     """1 mm pixels on a 2 km site: 4e12 pixels, refused (exit 5) from the measured bytes a pixel costs against the
     memory available, naming the option, the pixel count and a spacing that fits, which locate_pixels then makes;
     two ranks on the node count the second rank's share. The check comes before any array of the raster: a
     spacing of 1e-300 m (whose pixel count overflows any integer) is refused the same way."""
-    from pfault import checks
     from pfault.errors import OutOfMemory
     mesh = box_mesh((2000.0, 2000.0, 100.0), (4, 4, 1))
-    monkeypatch.setattr(checks, "available_memory", lambda: 5e6)          # 5 MB: a small raster, a fast test
+    mb5 = 5e6                                                               # 5 MB: a small raster, a fast test
     with pytest.raises(OutOfMemory) as err:
-        locate_pixels(mesh, "top", 1e-3)
+        locate_pixels(mesh, "top", 1e-3, memory=mb5)
     assert str(err.value) == (
         "-pfault_insar_spacing 0.001 m: the raster over the land surface (2000 x 2000 m) would have 4e+12 pixels "
         "(2e+06 x 2e+06) and need about 1.6e+06 GB (400 B a pixel with 1 rank on this node), more than the 0.005 GB "
         "of memory available; give a spacing of at least 20 m (e.g. -pfault_insar_spacing 20*m; without the option, "
         "the land surface's mean edge, 569 m)")
     assert (2000 / 20 + 1) ** 2 * 400 <= 5e6 < (2000 / 10 + 1) ** 2 * 400      # 20 m fits, 10 m does not
-    raster, _ = locate_pixels(mesh, "top", 20.0)
+    raster, _ = locate_pixels(mesh, "top", 20.0, memory=mb5)
     assert raster.inside.shape == (100, 100) and raster.inside.all()
     with pytest.raises(OutOfMemory, match=r"need about 2.6e\+06 GB \(650 B a pixel with 2 ranks on this node\).* at "
                                           r"least 50 m"):
-        locate_pixels(mesh, "top", 1e-3, ranks_on_node=2)
+        locate_pixels(mesh, "top", 1e-3, ranks_on_node=2, memory=mb5)
     with pytest.raises(OutOfMemory, match=r"-pfault_insar_spacing 1e-300 m: .* would have inf pixels"):
         locate_pixels(mesh, "top", 1e-300)
 
