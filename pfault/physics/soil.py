@@ -181,7 +181,9 @@ def _volumetric(law: SoilLaw, p_n: np.ndarray, p_c: np.ndarray, deps_v: np.ndarr
     log, k, lm = law.index_form, law.kappa, law.lam
     with np.errstate(divide="ignore", invalid="ignore"):
         eps1 = np.where(log, k * np.log(p_c / p_n), k * (p_c - p_n))
-    x = deps_v - eps1
+    # p'_c >= p'_n; a cell on its cap (eps_1 = 0 up to round-off of the trace) with no volumetric strain is on the
+    # elastic branch, the stiffer one: a Newton iteration from d eps = 0 then cannot overshoot an unloading step
+    x = deps_v - np.maximum(eps1, 0.0)
     virgin = x > 0
     dlam_de = np.where(virgin, 1.0 - k / lm, 0.0)
     dlam = dlam_de * x
