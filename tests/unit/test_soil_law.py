@@ -130,6 +130,21 @@ def test_elastic_cycle_closes():
     assert np.abs(h2.stress - hist.stress).max() < 1e-9 * np.abs(hist.stress).max()
 
 
+def test_on_the_cap_without_volumetric_strain_is_elastic():
+    """After a virgin step the cell is on its cap (p'_c = p' up to the round-off of the trace); a zero increment, or
+    one without volumetric part, starts on the elastic (stiffer) branch: a Newton iteration from zero then does not take
+    the soft virgin tangent into an unloading step."""
+    law = index_laws(8)
+    sv0 = RNG.uniform(50e3, 300e3, 8)
+    hist, branch, _ = sl.update(law, sl.initial_history(law, geostatic(sv0), sv0), uniaxial(np.full(8, 0.03)))
+    assert np.all(branch == sl.VIRGIN)
+    dev = np.zeros((8, 3, 3))
+    dev[:, 0, 0], dev[:, 1, 1], dev[:, 0, 1], dev[:, 1, 0] = 1e-3, -1e-3, 5e-4, 5e-4     # trace exactly zero
+    for d in (np.zeros((8, 3, 3)), dev):
+        _, branch, _ = sl.update(law, hist, d)
+        assert np.all(branch == sl.ELASTIC)
+
+
 # -- the tangent ----------------------------------------------------------------------------------------------
 def states(n):
     """Cells on every branch, each away from the kink x = 0 by more than the perturbations: elastic inside the cap
