@@ -6,7 +6,8 @@
    per branch) with the running maximum of the effective stress as memory, for layers whose initial vertical
    effective stress grows linearly with depth. Per point, compression positive, sigma_0 the initial, sigma_c the
    preconsolidation, sigma_m the largest and sigma the current vertical effective stress:
-       eps = kappa ln(min(sigma_m, sigma_c)/sigma_0) + lambda ln(max(sigma_m, sigma_c)/sigma_c) - kappa ln(sigma_m/sigma)
+       eps = kappa ln(min(sigma_m, sigma_c)/sigma_0) + lambda ln(max(sigma_m, sigma_c)/sigma_c)
+             - kappa ln(sigma_m/sigma)
    with kappa = Cr/((1+e0) ln 10), lambda = Cc/((1+e0) ln 10); with storage, eps = m_e (min - sigma_0) +
    m_v (max - sigma_c) - m_e (sigma_m - sigma), m = Ssk/(alpha gamma_w). Every stress is linear in depth within a
    layer (a drawdown h adds alpha gamma_w h, uniform in the layer), so the integrand is a sum of logarithms of linear

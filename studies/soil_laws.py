@@ -10,20 +10,18 @@ ElasticIsotropicPressureDependent, which its ModifiedCamClay builds on), G fixed
 unloading. lambda* = Cc/((1+e0) ln 10), kappa* = Cr/((1+e0) ln 10): the small-strain index law's own slopes, so any
 difference below is the model's, not the parameters'.
 
-Under oedometric strain (eps_q = 2/3 eps_v) the path is integrated with the continuum elastoplastic tangent in 20,000
-strain steps of 1e-6 (forward Euler: about 1e-4 relative): virgin loading from an isotropic state until the stress ratio is steady (the
-model's K0 on the normal compression line), then unloading to sigma'_v,max / OCR and reloading to sigma'_v,max. The
-index law gives eps = Cr/(1+e0) log10(OCR) for that unloading, a straight e - log sigma'_v line, and reloading
-retraces it. Printed per variant: the model's K0 on virgin loading, its virgin slope in e - log sigma'_v over Cc,
-the rebound at OCR 2, 4 and 8 over the index law's, whether the unloading path yields (reaches the yield surface on
-the passive side), and the strain left when reloaded to sigma'_v,max.
+Under oedometric strain (eps_q = 2/3 eps_v) the path is integrated with the continuum elastoplastic tangent in
+strain steps of 1e-6 (forward Euler: about 1e-4 relative): virgin loading from an isotropic state until the stress
+ratio is steady (the model's K0 on the normal compression line), then unloading to sigma'_v,max / OCR and reloading to
+sigma'_v,max. The index law gives eps = Cr/(1+e0) log10(OCR) for that unloading, a straight e - log sigma'_v line,
+and reloading retraces it. Printed per variant: the model's K0 on virgin loading, its virgin slope in e - log sigma'_v
+over Cc, the rebound at OCR 2, 4 and 8 over the index law's, whether the unloading path yields (reaches the yield
+surface on the passive side), and the strain left when reloaded to sigma'_v,max.
 """
 
 from __future__ import annotations
 
 import math
-
-import numpy as np
 
 CC, CR, E0, NU = 0.35, 0.05, 0.9, 0.3
 LAMBDA, KAPPA = CC / ((1 + E0) * math.log(10)), CR / ((1 + E0) * math.log(10))

@@ -209,7 +209,7 @@ def update(law: SoilLaw, history: SoilHistory, d_strain: np.ndarray, tangent: bo
     vol = _volumetric(law, p_n, history.preconsolidation, deps_v)
     r = law.shear_ratio
     p, dlam, kbar = vol["p"], vol["dlam"], vol["kbar"]
-    pv = np.where(dlam > 0, p, 1.0)                           # p' where it divides: on the virgin branch, p' >= p'_c > 0
+    pv = np.where(dlam > 0, p, 1.0)                 # p' where it divides: on the virgin branch, p' >= p'_c > 0
     denom = 1.0 + kbar * dlam / pv
     s = (s_n + (2 * r * kbar)[:, None, None] * de) / denom[:, None, None]
     stress = s - p[:, None, None] * np.eye(3)

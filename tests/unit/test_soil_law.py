@@ -5,7 +5,6 @@ a hypoelastic law with a branch-dependent shear modulus jumps); the elastic and 
 initial state from each form of the preconsolidation."""
 
 import numpy as np
-import pytest
 
 from pfault.physics import soil as sl
 
@@ -16,7 +15,8 @@ GAMMA_W = 9806.65
 
 
 def geostatic(sv0, k0=K0):
-    """Initial effective stresses (n,3,3, tension positive) at vertical effective stresses sv0 (compression positive)."""
+    """Initial effective stresses (n,3,3, tension positive) at vertical effective stresses sv0 (compression
+    positive)."""
     sv0 = np.atleast_1d(np.asarray(sv0, float))
     out = np.zeros((len(sv0), 3, 3))
     out[:, 0, 0] = out[:, 1, 1] = -k0 * sv0
@@ -155,7 +155,7 @@ def states(n):
     stress0 = geostatic(sv0, RNG.uniform(0.4, 0.8, n))
     shear = RNG.normal(size=(n, 3, 3)) * 5e3
     stress0 = stress0 + 0.5 * (shear + shear.transpose(0, 2, 1))
-    kind = np.arange(n) % 4                                      # 0 inside, 1 on cap unloading, 2 on cap loading, 3 crossing
+    kind = np.arange(n) % 4                  # 0 inside, 1 on the cap unloading, 2 on the cap loading, 3 crossing
     ocr = np.where((kind == 1) | (kind == 2), 1.0, RNG.uniform(1.2, 1.5, n))
     hist = sl.initial_history(law, stress0, -stress0[:, 2, 2] * ocr)
     p0 = sl.mean_stress(stress0)
