@@ -82,14 +82,15 @@ class Solve:
 class StepRecord:
     """A completed step: its number, its solve, and what was measured after it: the land surface's largest
     subsidence and horizontal displacement (m), the land surface's hazard maxima (``hazard``: on output steps,
-    pfault.io.hazard), each term's measures (``terms``: JSON-ready figures, a fault's per fault), and the
-    pore-pressure source's figures (``source``). ``initial``: the geostatic initial state (step 0)."""
+    pfault.io.hazard), each term's measures (``terms``: one per term, each with ``as_json``: a fault term's is
+    pfault.faults.measures.FaultMeasures), and the pore-pressure source's figures (``source``). ``initial``: the
+    geostatic initial state (step 0)."""
     step: int
     solve: Solve
     max_subsidence_m: float | None = None
     max_horizontal_displacement_m: float | None = None
     hazard: dict = field(default_factory=dict)
-    terms: dict = field(default_factory=dict)
+    terms: tuple = ()
     source: dict = field(default_factory=dict)
     initial: bool = False
 
@@ -113,6 +114,7 @@ class StepRecord:
         if self.max_subsidence_m is not None:
             rec["max_subsidence_m"] = float(self.max_subsidence_m)
             rec["max_horizontal_displacement_m"] = float(self.max_horizontal_displacement_m or 0.0)
-        rec.update(self.terms)
+        for measures in self.terms:
+            rec.update(measures.as_json())
         rec.update(self.hazard)
         return rec

@@ -77,12 +77,10 @@ class Stepper:
         self.model, self.state, self.solver, self.surface = model, state, solver, surface
         self.eq = model.equations
 
-    def terms_measures(self, x_loc: np.ndarray, x_rel: np.ndarray, at_rest: bool = False) -> dict:
-        """The terms' figures for the record (collective); ``at_rest``: under the loads of the initial state."""
-        out: dict = {}
-        for term, load, h in zip(self.eq.terms, self.eq.loads.term_loads, self.state.histories):
-            out.update(term.measures(x_loc, x_rel, term.at_rest(load) if at_rest else load, h, self.model.mesh))
-        return out
+    def terms_measures(self, x_loc: np.ndarray, x_rel: np.ndarray, at_rest: bool = False) -> tuple:
+        """The terms' measures for the record (collective); ``at_rest``: under the loads of the initial state."""
+        return tuple(term.measures(x_loc, x_rel, term.at_rest(load) if at_rest else load, h, self.model.mesh)
+                     for term, load, h in zip(self.eq.terms, self.eq.loads.term_loads, self.state.histories))
 
     def initial(self) -> StepRecord:
         """The geostatic initial equilibrium (step 0): its record."""

@@ -9,6 +9,7 @@ may not (it sits at a singular point: a fault's tip, its foot on a fixed boundar
 
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -16,8 +17,40 @@ from mpi4py import MPI
 
 from .contact import OPEN, SLIP, STATE_NAMES, STICK
 
-INTEGRALS = ("slip_potency_m3", "open_volume_m3", "slipping_area_m2", "open_area_m2")    # per fault and step
-BROKEN = ("faces_broken", "broken_area_m2", "broken_depth_m", "broken_length_m", "first_break_time_s")
+
+
+
+@dataclass(frozen=True)
+class FaultFigures:
+    """One fault at a step: its faces stuck, slipping and open, its largest opening of an open face and slip of a
+    face that has slid (m), its integrals (slip potency and open volume, m^3; slipping and open areas, m^2) and
+    its broken part (faces, area m^2, depth m, trace length on the land surface m, first break time s or None)."""
+    faces_stuck: int
+    faces_slipping: int
+    faces_open: int
+    max_opening_m: float
+    max_slip_m: float
+    slip_potency_m3: float
+    open_volume_m3: float
+    slipping_area_m2: float
+    open_area_m2: float
+    faces_broken: int
+    broken_area_m2: float
+    broken_depth_m: float
+    broken_length_m: float
+    first_break_time_s: float | None
+
+
+@dataclass(frozen=True)
+class FaultMeasures:
+    """The faults at a step: each fault's figures (by name) and the largest opening and slip over them (m)."""
+    faults: dict
+    max_fault_opening_m: float
+    max_fault_slip_m: float
+
+    def as_json(self) -> dict:
+        return {"max_fault_opening_m": self.max_fault_opening_m, "max_fault_slip_m": self.max_fault_slip_m,
+                "faults": {name: asdict(f) for name, f in self.faults.items()}}
 
 
 def state_counts(mpi: Any, states: np.ndarray) -> dict:
@@ -52,7 +85,7 @@ def broken_figures(faces: Any, n_faults: int, ground: np.ndarray, coords: np.nda
 
 
 def fault_figures(faces: Any, names: list, states: np.ndarray, slid: np.ndarray, gl: np.ndarray,
-                  broken: np.ndarray) -> dict:
+                  broken: np.ndarray) -> FaultMeasures:
     """Per fault (by name): how many faces are stuck, slipping and open (``states``: each owned face's, as
     reported), the largest opening of its open faces and the largest slip of its faces that have slid (``slid``),
     0 where there are none; the largest of these over the faults; and the integrals over each fault: the slip
@@ -73,14 +106,11 @@ def fault_figures(faces: Any, names: list, states: np.ndarray, slid: np.ndarray,
     mpi.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
     mpi.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
     mpi.Allreduce(MPI.IN_PLACE, integrals, op=MPI.SUM)
-    per = {name: {"faces_stuck": int(c[STICK]), "faces_slipping": int(c[SLIP]), "faces_open": int(c[OPEN]),
-                  "max_opening_m": float(m[0]), "max_slip_m": float(m[1]),
-                  **dict(zip(INTEGRALS, (float(v) for v in i))),
-                  "faces_broken": int(b[0]), "broken_area_m2": float(b[1]), "broken_depth_m": float(b[2]),
-                  "broken_length_m": float(b[3]), "first_break_time_s": float(b[4]) if np.isfinite(b[4]) else None}
+    per = {name: FaultFigures(int(c[STICK]), int(c[SLIP]), int(c[OPEN]), float(m[0]), float(m[1]),
+                              *(float(v) for v in i), int(b[0]), float(b[1]), float(b[2]), float(b[3]),
+                              float(b[4]) if np.isfinite(b[4]) else None)
            for name, c, m, i, b in zip(names, counts, largest, integrals, broken)}
-    return {"max_fault_opening_m": float(largest[:, 0].max(initial=0.0)),
-            "max_fault_slip_m": float(largest[:, 1].max(initial=0.0)), "faults": per}
+    return FaultMeasures(per, float(largest[:, 0].max(initial=0.0)), float(largest[:, 1].max(initial=0.0)))
 
 
 def face_fields(term: Any, x_total: np.ndarray, x_rel: np.ndarray, load: Any, history: Any, slid: np.ndarray

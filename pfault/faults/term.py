@@ -28,7 +28,7 @@ from . import contact as ct
 from .bubbles import CellBubbles
 from .faces import FaultFaces
 from .history import FacePressure, FaultHistory, FaultLoad, StepStart
-from .measures import broken_figures, face_fields, fault_figures, fault_summary
+from .measures import FaultMeasures, broken_figures, face_fields, fault_figures, fault_summary
 
 REPORT_TOLERANCE = 1e-9     # a face within this share of E (Pa) of a switch is reported closed and stuck
 
@@ -264,7 +264,7 @@ class FaultTerm:
 
     # -- what is reported ----------------------------------------------------------------------------
     def measures(self, x_loc: np.ndarray, x_rel: np.ndarray, load: FaultLoad, history: FaultHistory,
-                 mesh: Any) -> dict:
+                 mesh: Any) -> FaultMeasures:
         """The step record's figures of the faults (pfault.faults.measures.fault_figures) at the state x_loc,
         its jumps relative to the initial state from x_rel; ``mesh``: the local mesh (its land surface).
         Collective."""
