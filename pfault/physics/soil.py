@@ -117,13 +117,26 @@ class SoilHistory:
         return len(self.preconsolidation)
 
 
+def trace(t: np.ndarray) -> np.ndarray:
+    """tr(t) of (n,3,3) tensors (np.trace's sum, in its order, without its generality's cost)."""
+    return t[:, 0, 0] + t[:, 1, 1] + t[:, 2, 2]
+
+
+def plus_diagonal(t: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """t + d I for (n,3,3) tensors t and (n,) scalars d (a new array)."""
+    out = np.array(t, dtype=float, copy=True)
+    for i in range(3):
+        out[:, i, i] += d
+    return out
+
+
 def mean_stress(stress: np.ndarray) -> np.ndarray:
     """p' = -tr(sigma')/3 (compression positive) of tension-positive stresses (n,3,3)."""
-    return -np.trace(stress, axis1=1, axis2=2) / 3.0
+    return -trace(stress) / 3.0
 
 
 def deviator(t: np.ndarray) -> np.ndarray:
-    return t - (np.trace(t, axis1=1, axis2=2) / 3.0)[:, None, None] * np.eye(3)
+    return plus_diagonal(t, -(trace(t) / 3.0))
 
 
 # -- the initial state ---------------------------------------------------------------------------------------
@@ -170,21 +183,23 @@ def _phi(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """expm1(v)/v and its derivative, accurate at v -> 0."""
     small = np.abs(v) < SERIES
     w = np.where(small, 1.0, v)
-    phi = np.where(small, 1 + v / 2 + v * v / 6 + v ** 3 / 24, np.expm1(w) / w)
-    dphi = np.where(small, 0.5 + v / 3 + v * v / 8 + v ** 3 / 30, (w * np.exp(w) - np.expm1(w)) / (w * w))
+    e = np.expm1(w)
+    phi = np.where(small, 1 + v / 2 + v * v / 6 + v ** 3 / 24, e / w)
+    dphi = np.where(small, 0.5 + v / 3 + v * v / 8 + v ** 3 / 30, (w * np.exp(w) - e) / (w * w))
     return phi, dphi
 
 
-def _volumetric(law: SoilLaw, p_n: np.ndarray, p_c: np.ndarray, deps_v: np.ndarray) -> dict[str, np.ndarray]:
+def _volumetric(law: SoilLaw, p_n: np.ndarray, p_c: np.ndarray, deps_v: np.ndarray,
+                branch: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Mean stress p', plastic multiplier d lam, secant bulk modulus Kbar, their derivatives in d eps_v, and the
-    branch, of the closed-form step (module docstring)."""
+    branch, of the closed-form step (module docstring); ``branch``: the branches to take instead of the strain's."""
     log, k, lm = law.index_form, law.kappa, law.lam
     with np.errstate(divide="ignore", invalid="ignore"):
         eps1 = np.where(log, k * np.log(p_c / p_n), k * (p_c - p_n))
     # p'_c >= p'_n; a cell on its cap (eps_1 = 0 up to round-off of the trace) with no volumetric strain is on the
     # elastic branch, the stiffer one: a Newton iteration from d eps = 0 then cannot overshoot an unloading step
     x = deps_v - np.maximum(eps1, 0.0)
-    virgin = x > 0
+    virgin = x > 0 if branch is None else np.asarray(branch) == VIRGIN
     dlam_de = np.where(virgin, 1.0 - k / lm, 0.0)
     dlam = dlam_de * x
     dve = deps_v - dlam                                       # elastic volumetric strain of the step
@@ -197,30 +212,34 @@ def _volumetric(law: SoilLaw, p_n: np.ndarray, p_c: np.ndarray, deps_v: np.ndarr
             "branch": np.where(virgin, VIRGIN, ELASTIC)}
 
 
-def update(law: SoilLaw, history: SoilHistory, d_strain: np.ndarray, tangent: bool = False
-           ) -> tuple[SoilHistory, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+def update(law: SoilLaw, history: SoilHistory, d_strain: np.ndarray, tangent: bool = False,
+           branch: np.ndarray | None = None) -> tuple[SoilHistory, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
     """One step of every cell from ``history`` under the strain increment ``d_strain`` (n,3,3, tension positive):
     the new history, the branch of each cell (ELASTIC, VIRGIN) and, with ``tangent``, the consistent tangent
-    d sigma'/d(d eps) = a (x) I + 2 mu (I_sym - I (x) I / 3) as (a (n,3,3), mu (n,))."""
+    d sigma'/d(d eps) = a (x) I + 2 mu (I_sym - I (x) I / 3) as (a (n,3,3), mu (n,)).
+
+    ``branch``: the branch each cell takes instead of the one its strain decides (a semismooth Newton's given
+    configuration): ELASTIC continues the swelling line past the cap, VIRGIN the virgin line below it, from the
+    cap (a cell off its cap then starts the step from its cap: meaningful only for cells on it)."""
     p_n = mean_stress(history.stress)
     s_n = deviator(history.stress)
-    deps_v = -np.trace(d_strain, axis1=1, axis2=2)
+    deps_v = -trace(d_strain)
     de = deviator(d_strain)
-    vol = _volumetric(law, p_n, history.preconsolidation, deps_v)
+    vol = _volumetric(law, p_n, history.preconsolidation, deps_v, branch)
     r = law.shear_ratio
     p, dlam, kbar = vol["p"], vol["dlam"], vol["kbar"]
-    pv = np.where(dlam > 0, p, 1.0)                 # p' where it divides: on the virgin branch, p' >= p'_c > 0
+    pv = np.where(vol["branch"] == VIRGIN, p, 1.0)  # p' where it divides: on the virgin branch, p' > 0
     denom = 1.0 + kbar * dlam / pv
     s = (s_n + (2 * r * kbar)[:, None, None] * de) / denom[:, None, None]
-    stress = s - p[:, None, None] * np.eye(3)
-    flow = -np.eye(3) / 3 + s / (2 * r * pv)[:, None, None]
+    stress = plus_diagonal(s, -p)
+    flow = plus_diagonal(s / (2 * r * pv)[:, None, None], np.full(len(p), -1.0 / 3.0))
     new = SoilHistory(stress, np.maximum(history.preconsolidation, p),
                       history.plastic_strain + dlam[:, None, None] * flow)
     if not tangent:
         return new, vol["branch"], None
     ddenom = (vol["dkbar"] * dlam + kbar * vol["dlam_de"] - kbar * dlam * vol["dp"] / pv) / pv
     ds = ((2 * r * vol["dkbar"])[:, None, None] * de - ddenom[:, None, None] * s) / denom[:, None, None]
-    a = vol["dp"][:, None, None] * np.eye(3) - ds            # d eps_v = -tr(d eps): d sigma'/d tr = dp' I - ds/d eps_v
+    a = plus_diagonal(-ds, vol["dp"])                        # d eps_v = -tr(d eps): d sigma'/d tr = dp' I - ds/d eps_v
     return new, vol["branch"], (a, r * kbar / denom)
 
 
