@@ -216,7 +216,7 @@ class StationObserver(Observer):
         if not self.started:
             run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
             self.started = True
-        if not result.record["converged"]:
+        if not result.record.converged:
             return
         u = self.probe.values(result.u_rel)
         run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))
