@@ -1,7 +1,9 @@
 """The geostatic initial state a scene may start from (-pfault_geostatic true): step 0.
 
 An elastic gravity solve with the faults glued (every fault face stuck: no jump while the state forms) gives the
-vertical stress (the overburden in flat layers, the arching around stiff bodies); the horizontal stresses follow
+vertical stress (the overburden in flat layers, the arching around stiff bodies), except in the cells of a
+material with memory, whose vertical stress is the weight of the column above their centroid (the K0 procedure:
+pfault.soils.term.SoilTerm.initial_vertical_stress); the horizontal stresses follow
 the K0 rule on effective stresses, sigma'_h = K0 sigma'_v, with hydrostatic pore pressure below the water table
 (K0 = -pfault_geostatic_k0, default nu/(1-nu) of each material); no initial shear. That stress is the initial
 state: it loads nothing, displacements are those caused by the drawdown, and stresses and fault tractions are the
@@ -46,6 +48,11 @@ class GeostaticStart:
     def compute(self, state: Any, solve_linear: Any) -> None:
         """The initial stress (``state.sigma0``), the terms' histories from it, and u = u_ref: the initial state,
         in equilibrium with zero displacement."""
+        self.start(state, self.initial_stress(state, solve_linear))
+
+    def initial_stress(self, state: Any, solve_linear: Any) -> np.ndarray:
+        """The initial stress per local cell (cells x 3 x 3, Pa): the elastic gravity solve's vertical stress and
+        the K0 rule (``k0_stress``)."""
         eq = self.eq
         eq.loads.gravity(eq.loads.f)
         ug = state.u.duplicate()
@@ -60,8 +67,17 @@ class GeostaticStart:
                                    f"without it (-pfault_geostatic false)")
         asm = eq.asm
         sig = eq.effective_stress(eq.local_array(ug), state.histories)
-        state.sigma0 = k0_stress(sig, asm.centroids[:, 2], asm.alpha, asm.lam, asm.mu, self.settings)
         ug.destroy()
+        for term in eq.terms:
+            cells, vertical = term.initial_vertical_stress()    # a material with memory's: its overburden
+            sig[cells, 2, 2] = vertical
+        return k0_stress(sig, asm.centroids[:, 2], asm.alpha, asm.lam, asm.mu, self.settings)
+
+    def start(self, state: Any, sigma0: np.ndarray) -> None:
+        """The initial state of the stress ``sigma0`` (per local cell): the terms' histories from it, and
+        u = u_ref, in equilibrium with zero displacement."""
+        eq = self.eq
+        state.sigma0 = sigma0
         eq.loads.set(0.0)       # the terms' loads back from gravity's to those of the start
         state.u.set(0.0)
         loc = eq.local_array(state.u)

@@ -161,13 +161,18 @@ def read_fields(refs: Sequence[FieldRef], scene_file: str) -> dict[str, Any]:
 
 
 # -- per-cell arrays --------------------------------------------------------------------------------------
-def field_refs(materials: Sequence[Any], flow: Any = None) -> list[FieldRef]:
+SOIL = ("compression", "recompression", "void_ratio", "preconsolidation_value")   # pfault.scene.Soil's numbers
+
+
+def field_refs(materials: Sequence[Any], flow: Any = None, soils: Sequence[Any] = ()) -> list[FieldRef]:
     """The field options of the materials' mechanical properties and, with ``flow`` (the flow model's settings,
-    pfault.solver.flow.FlowSettings), of their flow properties."""
+    pfault.solver.flow.FlowSettings), of their flow properties, and of the laws with memory ``soils`` (one
+    pfault.scene.Soil or None per material)."""
     refs = [getattr(m, p) for m in materials for p in MECHANICAL if is_field(getattr(m, p))]
     if flow is not None:
         refs += [v for seq in (flow.conductivity, flow.storage, flow.void_ratio) for v in seq if is_field(v)]
-    return refs
+    refs += [getattr(s, p) for s in soils if s is not None for p in SOIL if is_field(getattr(s, p))]
+    return list({ref.option: ref for ref in refs}.values())      # a void ratio of both the flow and the law once
 
 
 def serial_field_values(names: Sequence[str], refs: Sequence[FieldRef], points: np.ndarray, tets: np.ndarray,

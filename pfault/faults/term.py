@@ -28,7 +28,7 @@ from . import contact as ct
 from .bubbles import CellBubbles
 from .faces import FaultFaces
 from .history import FacePressure, FaultHistory, FaultLoad, StepStart
-from .measures import FaultMeasures, broken_figures, face_fields, fault_figures, fault_summary
+from .measures import FaultMeasures, broken_figures, face_fields, fault_figures, fault_summary, state_counts
 
 REPORT_TOLERANCE = 1e-9     # a face within this share of E (Pa) of a switch is reported closed and stuck
 
@@ -85,6 +85,7 @@ class FaultTerm:
 
     name = "faults"
     rows = "face"           # its history's arrays are per fault face
+    full_newton_steps = True    # its semismooth Newton takes full steps (pfault.solver.setup.apply_solver_defaults)
 
     def __init__(self, faces: FaultFaces, settings: list, topology: FaultTopology, bubbles: CellBubbles,
                  pressure: FacePressure) -> None:
@@ -125,6 +126,10 @@ class FaultTerm:
         return replace(load, bubbles=self.bubbles.zero_load())
 
     # -- histories ---------------------------------------------------------------------------------
+    def initial_vertical_stress(self) -> tuple[np.ndarray, np.ndarray]:
+        """None: the cells beside the faces take the elastic gravity solve's."""
+        return np.zeros(0, np.int64), np.zeros(0)
+
     def initial_history(self) -> FaultHistory:
         """Before any load: pre-existing faults broken, candidate surfaces intact."""
         return FaultHistory.new(self.laws.strength.initially_broken())
@@ -231,6 +236,10 @@ class FaultTerm:
             dt[pen] -= dg[pen] / np.stack([p.c_n, p.c_t, p.c_t], axis=1)[:, None, :]
         return st, r, dg, dt
 
+    def counts(self, state: np.ndarray) -> dict:
+        """The faces stuck, slipping and open in ``state`` on all ranks (collective)."""
+        return state_counts(self.faces.mpi, np.asarray(state, np.int64))
+
     def jacobian_varies(self, state: np.ndarray) -> bool:
         """Whether the Jacobian depends on the iterate beyond the faces' states (slipping faces), on all ranks.
         Penalty faces' rows are the Lagrange rows on a jump affine in the tractions: as those, affine per state."""
@@ -262,7 +271,16 @@ class FaultTerm:
         dt = self.tractions(x_loc) - history.t0
         return self.bubbles.cell, self.bubbles.cell_strain(x_loc, dt, load.bubbles)
 
+    def cell_stress(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """None: the cells beside the faces are elastic (their bubbles' strain is ``cell_strain``)."""
+        return np.zeros(0, np.int64), np.zeros((0, 3, 3))
+
     # -- what is reported ----------------------------------------------------------------------------
+    def columns(self, xy: np.ndarray, mesh: Any) -> None:
+        """Nothing measured along columns."""
+        return None
+
     def measures(self, x_loc: np.ndarray, x_rel: np.ndarray, load: FaultLoad, history: FaultHistory,
                  mesh: Any) -> FaultMeasures:
         """The step record's figures of the faults (pfault.faults.measures.fault_figures) at the state x_loc,
