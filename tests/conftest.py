@@ -116,6 +116,9 @@ JUMPS = ("opening", "slip", "slip_magnitude")
 TRACTIONS = ("traction_normal", "traction_normal_effective", "traction_shear")
 STRAINS = ("horizontal_strain", "angular_distortion")
 STRAINS_MAXIMA = ("max_horizontal_strain", "max_angular_distortion")
+# a soil's head margin is exactly zero on the virgin line up to the round-off of the stresses it is computed from:
+# measured, with the critical heads, against the largest of them (fields.h5 per cell, surface.h5 per layer)
+HEADS = ("head_margin", "preconsolidation_head", "critical_head")
 
 
 def _round_off_scales(name, group, moved, extent):
@@ -128,6 +131,8 @@ def _round_off_scales(name, group, moved, extent):
     elif name == "surface":
         strain = max(largest(STRAINS), largest(("displacement",)) / extent)
         scales.update({k: strain for k in STRAINS})
+    heads = [k for k in group if k.startswith(HEADS)]
+    scales.update({k: largest(heads) for k in heads})
     return scales
 
 

@@ -16,6 +16,7 @@ from ..paths import beside_scene
 from .insar import InsarObserver, InsarSettings, read_insar_settings
 from .insar import check_continuation as insar_continue
 from .probes import locate_pixels
+from ..soils.stations import soil_station_observers
 from .stations import StationObserver, locate_stations
 from .stations import check_continuation as stations_continue
 
@@ -68,6 +69,7 @@ class Observations:
         out: list = []
         if self.stations is not None:
             out.append(StationObserver(output, *self.stations))
+            out += soil_station_observers(output, self.stations[0], output.model.scene.mesh_origin)
         if self.pixels is not None:
             out.append(InsarObserver(output, *self.pixels, self.settings.insar.los))
         return out

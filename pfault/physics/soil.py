@@ -253,10 +253,19 @@ def tangent_tensor(a: np.ndarray, mu: np.ndarray) -> np.ndarray:
 
 
 # -- measures ------------------------------------------------------------------------------------------------
+def vertical_preconsolidation_of(law: SoilLaw, history: SoilHistory) -> np.ndarray:
+    """The preconsolidation as a vertical effective stress (Pa, compression positive): p'_c over the oedometric
+    ratio (1+nu)/(3(1-nu)), the vertical stress at which a cell consolidated at K0 reaches its cap."""
+    return history.preconsolidation / law.oedometric_ratio
+
+
 def vertical_margin(law: SoilLaw, history: SoilHistory) -> np.ndarray:
-    """How much more vertical effective stress (Pa) an oedometric reloading from the current state bears before the
-    cell reaches its preconsolidation: (p'_c - p') / ((1+nu)/(3(1-nu))); 0 on the virgin line."""
-    return (history.preconsolidation - mean_stress(history.stress)) / law.oedometric_ratio
+    """How much more vertical effective stress (Pa) a cell bears before it reaches its preconsolidation: the
+    vertical preconsolidation less the current vertical effective stress; 0 on the virgin line. On the K0 path it
+    is (p'_c - p') / ((1+nu)/(3(1-nu))), the oedometric reloading's; off it, it is what a hydrogeologist compares a
+    head with (CSUB's preconsolidation stress against the vertical effective stress), and its mean over a horizontal
+    slab of cells is the one the slab's weight and heads fix (equilibrium), whatever the cells' stiffness."""
+    return vertical_preconsolidation_of(law, history) + history.stress[:, 2, 2]
 
 
 def head_margin(law: SoilLaw, history: SoilHistory, alpha: np.ndarray | float, gamma_w: float) -> np.ndarray:

@@ -1,6 +1,7 @@
 """The materials with memory measured along vertical columns: under the land surface's points and under the
 stations, each layer's compaction (its cells' vertical strains integrated down the column, m) and its critical head
-and margin (of its cells in the column: the highest critical head and the smallest margin, m).
+and margin (m: their means over the length the column runs in the layer), of the cells' values recovered at their
+vertices (``SoilColumns``).
 
 A column is the vertical line through a point (x, y): each cell it crosses adds its value times the length of the
 line inside it (the chord, from the cell's barycentric coordinates, which are affine along the line). A point on a
@@ -45,13 +46,6 @@ def segments(points: np.ndarray, corners: np.ndarray, grad: np.ndarray) -> tuple
     return point[keep], cell[keep], zlo[keep], zhi[keep]
 
 
-def chords(points: np.ndarray, corners: np.ndarray, grad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(point, cell, length) of every vertical line through ``points`` (m, 2) that crosses a tetrahedron, with the
-    length of the line inside it (``segments``)."""
-    point, cell, zlo, zhi = segments(points, corners, grad)
-    return point, cell, zhi - zlo
-
-
 def _extent(coords: np.ndarray, mpi: Any) -> tuple[np.ndarray, np.ndarray]:
     """The mesh's box in x, y on every rank (collective)."""
     lo, hi = coords[:, :2].min(axis=0, initial=np.inf), coords[:, :2].max(axis=0, initial=-np.inf)
@@ -71,45 +65,76 @@ def nudged(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 class SoilColumns:
     """The columns of the cells of the soil term ``term`` (pfault.soils.term.SoilTerm) under the points ``xy``
-    (m, 2, mesh coordinates, the same on every rank) of the local mesh ``mesh``. Collective."""
+    (m, 2, mesh coordinates, the same on every rank) of the local mesh ``mesh``. Collective.
+
+    A cell's values are first recovered at its vertices (the mean over the cells of the same layer around the
+    vertex, on the same side of a fault, weighted by their volumes; every rank's cells) and the column integrates
+    that continuous P1 field: P1 cells of a soil whose stiffness grows with depth share a load change unevenly (a
+    cell's stress change differs from the 1-D one by up to half of it where cells are as tall as they are deep),
+    and the mean over the cells around a vertex cancels most of it, as the mean over a horizontal slab of cells
+    cancels all of it (equilibrium)."""
 
     def __init__(self, term: Any, xy: np.ndarray, mesh: Any) -> None:
         self.term, self.mpi = term, term.mpi
-        self.m, self.n_layers = len(xy), len(term.soil.layers)
+        soil = term.soil
+        self.m, self.n_layers = len(xy), len(soil.layers)
         lo, hi = _extent(mesh.coords, self.mpi)
-        corners = mesh.coords[mesh.cells[term.soil.cells]]
-        self.point, self.cell, self.length = chords(nudged(np.asarray(xy, float), lo, hi), corners, term.grad)
-        self.slot = self.point * self.n_layers + term.soil.layer[self.cell]
+        corners = mesh.coords[mesh.cells[soil.cells]]
+        self.point, self.cell, zlo, zhi = segments(nudged(np.asarray(xy, float), lo, hi), corners, term.grad)
+        self.length = zhi - zlo
+        self.slot = self.point * self.n_layers + soil.layer[self.cell]
+        # barycentric coordinates of each chord's midpoint in its cell: lambda_i = 1 + g_i . (p - X_i)
+        mid = np.column_stack([nudged(np.asarray(xy, float), lo, hi)[self.point], 0.5 * (zlo + zhi)])
+        x, g = corners[self.cell], term.grad[self.cell]
+        self.weights = 1.0 + np.einsum("nik,nik->ni", g, mid[:, None, :] - x)
+        # each soil cell's vertices as keys of the recovery: (serial vertex, fault side, layer), over every rank
+        key = ((mesh.vert_serial[mesh.cells[soil.cells]] * (int(mesh.cell_side.max(initial=0)) + 1)
+                + mesh.cell_side[soil.cells]) * self.n_layers + soil.layer[:, None]).astype(np.int64)
+        mpi_keys = np.unique(np.concatenate(self.mpi.allgather(np.unique(key))))
+        self.key = np.searchsorted(mpi_keys, key)
+        self.n_keys = len(mpi_keys)
 
-    def integral(self, values: np.ndarray) -> np.ndarray | None:
-        """Per point and layer (m, layers) the column integral of ``values`` (per cell of the term) on rank 0 (None
-        elsewhere)."""
-        part = np.bincount(self.slot, weights=self.length * values[self.cell], minlength=self.m * self.n_layers)
+    def recovered(self, values: np.ndarray) -> np.ndarray:
+        """(n, 4, q): each soil cell's ``values`` (n, q) recovered at its vertices (the class's docstring)."""
+        v = np.asarray(values, float).reshape(len(self.key), -1)
+        w = self.term.vol
+        sums = np.zeros((self.n_keys, v.shape[1] + 1))
+        np.add.at(sums, self.key.ravel(), np.repeat(np.column_stack([w[:, None] * v, w]), 4, axis=0))
+        self.mpi.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+        at = sums[self.key]                                   # (n, 4, q + 1)
+        return at[:, :, :-1] / at[:, :, -1:]
+
+    def along(self, values: np.ndarray) -> np.ndarray:
+        """Per chord (pair), the P1 field of the recovered ``values`` (n, q) at the chord's midpoint: its mean over
+        the chord (affine along it)."""
+        return np.einsum("pa,paq->pq", self.weights, self.recovered(values)[self.cell])
+
+    def integral(self, chord_values: np.ndarray) -> np.ndarray | None:
+        """Per point and layer (m, layers, q) the column integral of ``chord_values`` (per chord, (pairs, q)) on
+        rank 0 (None elsewhere)."""
+        q = chord_values.shape[1]
+        part = np.zeros((self.m * self.n_layers, q))
+        np.add.at(part, self.slot, self.length[:, None] * chord_values)
         total = np.zeros_like(part) if self.mpi.rank == 0 else None
         self.mpi.Reduce(part, total, op=MPI.SUM, root=0)
-        return None if total is None else total.reshape(self.m, self.n_layers)
-
-    def largest(self, values: np.ndarray) -> np.ndarray | None:
-        """Per point and layer the largest of ``values`` over the column's cells (NaN where it has none), rank 0."""
-        part = np.full(self.m * self.n_layers, -np.inf)
-        np.maximum.at(part, self.slot, values[self.cell])
-        total = np.zeros_like(part) if self.mpi.rank == 0 else None
-        self.mpi.Reduce(part, total, op=MPI.MAX, root=0)
-        return None if total is None else np.where(np.isfinite(total), total, np.nan).reshape(self.m, self.n_layers)
+        return None if total is None else total.reshape(self.m, self.n_layers, q)
 
     def layers(self, x_loc: np.ndarray, load: Any, history: Any) -> dict | None:
-        """Per point and layer (m, layers), rank 0 (None elsewhere): its elastic and inelastic compaction (m), the
-        highest critical head and the smallest head margin of its cells (m; NaN where the column has none of the
-        layer). Collective."""
+        """Per point and layer (m, layers), rank 0 (None elsewhere): its elastic and inelastic compaction (m) and the
+        critical head and head margin of the layer (m; their means over the column's length in it: a layer's
+        critical head, as CSUB's interbed has one; NaN where the column does not cross the layer). Collective."""
         from .measures import per_cell
         q = per_cell(self.term.soil, self.term.advanced(x_loc, history), load)
-        out = {"compaction_elastic": self.integral(q["compaction_elastic"]),
-               "compaction_inelastic": self.integral(q["compaction_inelastic"]),
-               "critical_head": self.largest(q["preconsolidation_head"]),
-               "head_margin": self.largest(-q["head_margin"])}
-        if out["head_margin"] is not None:
-            out["head_margin"] = -out["head_margin"]
-        return out if self.mpi.rank == 0 else None
+        names = ("compaction_elastic", "compaction_inelastic", "preconsolidation_head", "head_margin")
+        chords = self.along(np.column_stack([q[n] for n in names]))
+        sums = self.integral(np.column_stack([chords, np.ones(len(chords))]))
+        if sums is None:
+            return None
+        length = sums[:, :, -1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(length[:, :, None] > 0, sums[:, :, 2:4] / length[:, :, None], np.nan)
+        return {"compaction_elastic": sums[:, :, 0], "compaction_inelastic": sums[:, :, 1],
+                "critical_head": mean[:, :, 0], "head_margin": mean[:, :, 1]}
 
     def surface(self, x_loc: np.ndarray, load: Any, history: Any, displacement: np.ndarray | None
                 ) -> tuple[dict, dict]:

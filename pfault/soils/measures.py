@@ -31,12 +31,12 @@ REPORT_STRAIN = 1e-12       # plastic volumetric strain of a step below which a 
 @dataclass(frozen=True)
 class LayerFigures:
     """A material with memory at a step: its cells, those that compacted on the virgin line in the last step, the
-    smallest head margin and the highest critical head of its cells (m), its largest inelastic compaction (vertical
-    strain)."""
+    mean head margin and critical head of its cells (m, weighted by their volumes: pfault.soils.columns on why a mean)
+    and its largest inelastic compaction (vertical strain)."""
     cells: int
     cells_virgin: int
-    min_head_margin_m: float
-    max_critical_head_m: float
+    head_margin_m: float
+    critical_head_m: float
     max_compaction_inelastic: float
 
 
@@ -70,7 +70,7 @@ def per_cell(soil: SoilCells, memory: SoilMemory, load: SoilLoad) -> dict:
     law = memory.law
     margin = sl.head_margin(soil.law, law, soil.alpha, soil.gamma_w)
     inelastic = -law.plastic_strain[:, 2, 2]
-    return {"preconsolidation_stress": law.preconsolidation / soil.law.oedometric_ratio,
+    return {"preconsolidation_stress": sl.vertical_preconsolidation_of(soil.law, law),
             "preconsolidation_head": load.dp / soil.gamma_w - margin, "head_margin": margin,
             "compaction_elastic": -memory.strain[:, 2, 2] - inelastic, "compaction_inelastic": inelastic}
 
@@ -85,28 +85,28 @@ def cell_fields(soil: SoilCells, n_cells: int, memory: SoilMemory, load: SoilLoa
     return out
 
 
-def layer_figures(soil: SoilCells, mpi: Any, memory: SoilMemory, load: SoilLoad) -> SoilMeasures:
-    """Per layer (by name): its cells, those that compacted on the virgin line in the last step, the smallest head
-    margin and the highest critical head of its cells (the further drawdown it bears before part of it compacts
-    inelastically again, and the head at which that happens), and its largest inelastic compaction (vertical
+def layer_figures(soil: SoilCells, mpi: Any, memory: SoilMemory, load: SoilLoad, volume: np.ndarray) -> SoilMeasures:
+    """Per layer (by name): its cells, those that compacted on the virgin line in the last step, the mean head margin
+    and critical head of its cells (the further drawdown it bears before it compacts inelastically again, and the
+    head at which that happens; weighted by the cells' ``volume``), and its largest inelastic compaction (vertical
     strain). Collective."""
     n = len(soil.layers)
     q = per_cell(soil, memory, load)
-    counts = np.zeros((n, 2), np.int64)
-    np.add.at(counts, soil.layer, np.column_stack([np.ones(len(soil.layer), np.int64), memory.branch == sl.VIRGIN]))
-    low = np.full((n, 3), -np.inf)                   # maxima of -margin, critical head, inelastic compaction
-    np.maximum.at(low, soil.layer, np.column_stack([-q["head_margin"], q["preconsolidation_head"],
-                                                    q["compaction_inelastic"]]))
-    mpi.Allreduce(MPI.IN_PLACE, counts, op=MPI.SUM)
-    mpi.Allreduce(MPI.IN_PLACE, low, op=MPI.MAX)
-    return SoilMeasures({name: LayerFigures(int(c[0]), int(c[1]), float(-m[0]), float(m[1]), float(m[2]))
-                         for name, c, m in zip(soil.names, counts, low)})
+    sums = np.zeros((n, 5))
+    np.add.at(sums, soil.layer, np.column_stack([np.ones(len(soil.layer)), memory.branch == sl.VIRGIN, volume,
+                                                volume * q["head_margin"], volume * q["preconsolidation_head"]]))
+    largest = np.full(n, -np.inf)
+    np.maximum.at(largest, soil.layer, q["compaction_inelastic"])
+    mpi.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+    mpi.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
+    v = np.where(sums[:, 2] > 0, sums[:, 2], 1.0)
+    return SoilMeasures({name: LayerFigures(int(c[0]), int(c[1]), float(c[3] / w), float(c[4] / w), float(m))
+                         for name, c, w, m in zip(soil.names, sums, v, largest)})
 
 
 def soil_summary(soil: SoilCells, mpi: Any, steps: list) -> dict:
     """summary.json's ``soils`` (per layer: its cells, the largest inelastic compaction over the steps ``steps``, and
-    at the last of them the cells that compacted on the virgin line, the smallest head margin and the highest
-    critical head) and the land surface's inelastic and elastic subsidence (pfault.soils.columns.SoilSurface's
+    at the last of them the cells that compacted on the virgin line, the mean head margin and critical head) and the land surface's inelastic and elastic subsidence (pfault.soils.columns.SoilSurface's
     figures: their largest over the steps, and at the last)."""
     per = [r["soils"] for r in steps if "soils" in r]
     last = per[-1] if per else {}

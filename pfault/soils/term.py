@@ -229,7 +229,7 @@ class SoilTerm:
     def measures(self, x_loc: np.ndarray, x_rel: np.ndarray, load: SoilLoad, history: SoilMemory,
                  mesh: Any) -> measures.SoilMeasures:
         """The step record's figures per layer (pfault.soils.measures.layer_figures). Collective."""
-        return measures.layer_figures(self.soil, self.mpi, self.advanced(x_loc, history), load)
+        return measures.layer_figures(self.soil, self.mpi, self.advanced(x_loc, history), load, self.vol)
 
     def summary(self, steps: list, mesh: Any) -> dict:
         """summary.json's figures of the materials with memory (pfault.soils.measures.soil_summary)."""

@@ -1,0 +1,101 @@
+"""Soils that remember on 1 and 2 ranks, alone and with a fault: the same answer on both (1e-10), and a restart across
+the loading/unloading switch equal to the uninterrupted run.
+
+config/soil_column.opts (5 stages: loading past the preconsolidation, further, unloading, reloading past the earlier
+maximum, unloading): 1 against 2 ranks; stopped after the unloading (step 3, every cell back on its swelling line)
+and continued through the reloading past the earlier maximum (every cell back on the virgin line), on 1 and 2 ranks.
+A faulted box with soils (the equations' two terms: the fault's faces and the soils' cells; the fault's faces
+stick, slip and open, cells compact on the virgin line, then swell when the heads recover): 1 against 2 ranks, and
+its restart across the recovery.
+"""
+
+import pytest
+
+from conftest import compare_runs, run_scene
+
+COLUMN = "config/soil_column.opts"
+FAULTED = """# a box with a fault and soils that remember: the equations' two terms
+-pfault_scene faulted_soils
+-pfault_mesh_generator box
+-pfault_box_size 400,100,100
+-pfault_box_cells 12,4,8
+-pfault_box_materials clay,sand,rock
+-pfault_box_interfaces 20,60
+-pfault_box_fault_planes fissure:x:200:0:100:-40:0
+-pfault_material_clay_compression_index 0.25
+-pfault_material_clay_recompression_index 0.04
+-pfault_material_clay_void_ratio 0.9
+-pfault_material_clay_poisson_ratio 0.3
+-pfault_material_clay_density 1900
+-pfault_material_sand_compression_index 0.05
+-pfault_material_sand_recompression_index 0.01
+-pfault_material_sand_void_ratio 0.7
+-pfault_material_sand_poisson_ratio 0.3
+-pfault_material_sand_density 2000
+-pfault_material_rock_young_modulus 1200*MPa
+-pfault_material_rock_poisson_ratio 0.3
+-pfault_material_rock_density 2400
+-pfault_faults fissure
+-pfault_fault_fissure_friction_angle 30
+-pfault_bc_bottom_type fixed
+-pfault_bc_xmax_type fixed
+-pfault_bc_xmin_type roller
+-pfault_bc_ymin_type roller
+-pfault_bc_ymax_type roller
+-pfault_geostatic true
+-pfault_material_sand_head_drawdown 0:0,2*year:20,4*year:5
+-pfault_material_clay_head_drawdown 0:0,2*year:10,4*year:2
+-pfault_time_end 4*year
+-pfault_time_steps 4
+-pfault_solver mumps
+"""
+EXACT = ["-ksp_atol", "0", "-ksp_rtol", "1e-12"]        # Krylov solves to round-off: runs agree to it
+
+
+@pytest.fixture(scope="module")
+def faulted(tmp_path_factory):
+    path = tmp_path_factory.mktemp("faulted") / "faulted_soils.opts"
+    path.write_text(FAULTED)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def column_runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("column")
+    return {ranks: (base / f"r{ranks}", run_scene(COLUMN, base / f"r{ranks}", ranks=ranks, extra=EXACT)[1])
+            for ranks in (1, 2)}
+
+
+def test_column_on_one_and_two_ranks(column_runs):
+    (one, s1), (two, s2) = column_runs[1], column_runs[2]
+    assert s1["converged"] and s2["converged"] and s2["ranks"] == 2
+    virgin = [r["cells_virgin"] for r in s1["steps"] if not r.get("initial")]
+    assert virgin[1] == virgin[3] == 234 and virgin[2] == virgin[4] == 0      # loading, unloading, reloading
+    compare_runs(one, two, 1e-10)
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_restart_across_the_switch(column_runs, tmp_path, ranks):
+    ref, _ = column_runs[ranks]
+    part = tmp_path / "part"
+    run_scene(COLUMN, part, ranks=ranks, extra=[*EXACT, "-pfault_time_end", "3*year", "-pfault_time_steps", "3"])
+    _, s = run_scene(COLUMN, part, ranks=ranks, extra=[*EXACT, "-pfault_restart", str(part)])
+    assert s["completed_steps"] == [1, 2, 3, 4, 5] and s["restart"]["step"] == 3
+    compare_runs(ref, part, 1e-12 if ranks == 1 else 1e-10)
+
+
+def test_faults_and_soils_together(faulted, tmp_path):
+    """Both terms in one run: the faces' counts and the cells' in every step's record, on 1 and 2 ranks alike
+    (1e-10), and a restart after the first recovery step equal to the uninterrupted run."""
+    runs = {r: run_scene(faulted, tmp_path / f"r{r}", ranks=r, extra=EXACT)[1] for r in (1, 2)}
+    steps = [r for r in runs[1]["steps"] if not r.get("initial")]
+    assert all({"stick", "slip", "open", "cells_virgin", "cells_elastic"} <= set(r) for r in steps)
+    assert steps[0]["cells_virgin"] > 0 and steps[0]["open"] + steps[0]["slip"] > 0
+    assert steps[2]["cells_virgin"] == 0                            # the heads recover: every cell swells
+    assert runs[1]["soils"]["clay"]["max_compaction_inelastic"] > 0 and "faults" in runs[1]
+    compare_runs(tmp_path / "r1", tmp_path / "r2", 1e-10)
+    part = tmp_path / "part"
+    run_scene(faulted, part, ranks=2, extra=[*EXACT, "-pfault_time_end", "3*year", "-pfault_time_steps", "3"])
+    _, s = run_scene(faulted, part, ranks=2, extra=[*EXACT, "-pfault_restart", str(part)])
+    assert s["completed_steps"] == [1, 2, 3, 4]
+    compare_runs(tmp_path / "r2", part, 1e-10)
