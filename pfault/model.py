@@ -31,9 +31,8 @@ from .faults.history import face_pressure
 from .faults.term import FaultTerm, fault_topology
 from .mesh.fault import split_faults
 from .sources.heads import build_heads_source, check_heads_files, read_heads_settings, read_mesh_origin
-from .physics.elasticity import tet_geometry
 from .soils.cells import check_krylov, land_top, with_reference
-from .soils.overburden import overburden
+from .soils.overburden import initial_effective_stress
 from .soils.term import SoilTerm
 
 
@@ -255,16 +254,14 @@ def fault_terms(scene: Scene, mesh: Any, dofmap: Any, assembler: Any, cell_props
 
 
 def serial_overburden(scene: Scene, serial: Any, serial_values: dict) -> np.ndarray:
-    """Rank 0: the weight of the column above the centroid of every cell of the materials with memory (Pa; zero
-    elsewhere), on the serial mesh (pfault.soils.overburden)."""
+    """Rank 0: the initial vertical effective stress of every cell of the materials with memory (Pa, compression
+    positive; zero elsewhere), on the serial mesh: pfault.soils.overburden.initial_effective_stress."""
     cell = properties.CellProperties.of_cells(scene.materials, serial.cell_material, serial_values)
     soil = np.array([m is not None for m in scene.soils])[serial.cell_material]
-    corners = serial.points[serial.tets]
-    grad, _ = tet_geometry(corners)
     out = np.zeros(len(serial.tets))
     c = np.flatnonzero(soil)
-    out[c] = overburden(corners[c].mean(axis=1), c, serial.points, serial.tets, grad,
-                        cell.density * scene.settings.gravity)
+    out[c] = initial_effective_stress(serial.points, serial.tets, c, cell.density, cell.biot_coefficient,
+                                      scene.settings)
     return out
 
 
@@ -284,7 +281,7 @@ def _soil_cells(comm: Any, scene: Scene, serial: Any, mesh: Any, serial_values: 
 
 def soil_terms(soil: Any, mesh: Any, dofmap: Any, assembler: Any, overburden: np.ndarray | None) -> tuple:
     """The term of the materials with memory (pfault.soils.term), none without them; ``overburden``: the weight of
-    the column above every serial cell's centroid (Pa; ``serial_overburden``)."""
+    the initial vertical effective stress of every serial cell (Pa; ``serial_overburden``)."""
     if soil is None:
         return ()
     with logged("pfaultSoilSetup"):

@@ -14,7 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import Any
+
 from ..mesh.serial import TET_FACES
+from ..physics.elasticity import tet_geometry
 from .columns import nudged
 
 
@@ -66,3 +69,25 @@ def overburden(points: np.ndarray, cells: np.ndarray, coords: np.ndarray, tets: 
         cell[ray] = nbr[c, k]
         ray = ray[cell[ray] >= 0]
     return weight
+
+
+def initial_effective_stress(points: np.ndarray, tets: np.ndarray, cells: np.ndarray, density: np.ndarray,
+                             alpha: np.ndarray, settings: Any) -> np.ndarray:
+    """The initial vertical effective stress (Pa, compression positive) of the cells ``cells`` of a mesh (``points``,
+    ``tets``; ``density``, ``alpha`` per cell): the overburden at the middle of each cell's vertical extent less
+    alpha times the hydrostatic pore pressure there (the water table and gravity of ``settings``). The overburden
+    is marched up from the cell's centroid (``overburden``) and carried to the middle of its extent with the cell's
+    own density. The middle of the extent, not the centroid: the cells of a slab of a flat layer (every P1 cell of a
+    hexahedron spans its height) then start from the same stress, and P1 holds the 1-D response exactly; from their
+    centroids' stresses, in the ratios 1:2:3 under the land surface, they shared a drawdown unevenly, and Wuxi's
+    land surface, 20 m cells under it far from the ridge, subsided by 0.90 to 1.55 m within 500 m (1.06-1.08 m with
+    linear soils)."""
+    corners = points[tets]
+    grad, _ = tet_geometry(corners)
+    g = settings.gravity
+    centre = corners[cells].mean(axis=1)
+    z = corners[cells][:, :, 2]
+    middle = 0.5 * (z.min(axis=1) + z.max(axis=1))
+    total = overburden(centre, cells, points, tets, grad, density * g) + density[cells] * g * (centre[:, 2] - middle)
+    pore = settings.water_density * g * np.maximum(settings.water_table - middle, 0.0)
+    return total - alpha[cells] * pore

@@ -38,7 +38,7 @@ class SoilTerm:
     ``dofs`` (n, 12), which of the local dofs are free (``free``), the local-to-global map ``to_global``, the rows
     this rank owns (``owned``: the first and one past the last global row) and the
     reference Lame parameters of the geostatic gravity solve (``lame``, pfault.soils.cells.reference_young) and
-    the weight of the column above each cell's centroid (``overburden``, Pa: pfault.soils.overburden). Pure in the
+    each cell's initial vertical effective stress (``overburden``, Pa: pfault.soils.overburden). Pure in the
     memory."""
 
     name = "soils"
@@ -84,12 +84,14 @@ class SoilTerm:
 
     # -- histories ---------------------------------------------------------------------------------
     def initial_vertical_stress(self) -> tuple[np.ndarray, np.ndarray]:
-        """The cells' initial total vertical stress: the weight of the column above their centroids, the K0
-        procedure. A normally consolidated soil was consolidated under its overburden, and the elastic gravity
+        """The cells' initial total vertical stress (at their centroids, where the geostatic start adds the pore
+        pressure): their initial vertical effective stress ``overburden`` (the K0 procedure, pfault.soils.overburden)
+        less alpha p0. A normally consolidated soil was consolidated under its overburden, and the elastic gravity
         solve's P1 stress scatters by up to rho g h around it (h the cell height) and carries an elastic soil's arching
         near stiff bodies: at Wuxi's size factor 3 it leaves 836 of the 12,477 soil cells beside the ridge without
         compression."""
-        return self.soil.cells, -self.overburden
+        s = self.soil
+        return s.cells, -self.overburden - s.alpha * s.static_pressure
 
     def initial_history(self) -> SoilMemory:
         return SoilMemory.empty(self.n)
