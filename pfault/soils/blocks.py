@@ -45,37 +45,69 @@ def tangent_stiffness(grad: np.ndarray, vol: np.ndarray, a: np.ndarray, mu: np.n
 
 
 class CellRows:
-    """Adds the element matrices of cells with global dofs ``gdofs`` (n, 12; -1 left out) to a matrix whose
-    ownership range is ``owned`` (first, last + 1), row by row: the entries of the rows this rank owns summed per
-    matrix entry (the map from the cells' entries to the rows' is found once) and set as whole rows (PETSc's
-    MatSetValues merges a sorted row in one pass, where a cell's 12 x 12 block needs 144 searches); the rows other
-    ranks own (a vertex this rank shares) as cell blocks, whose owned rows are left out. Paper-size Wuxi's soil
-    cells on a rank: ... s instead of ... s per Jacobian."""
+    """Adds the element matrices of cells with global dofs ``gdofs`` (n, 12: a vertex's 3 dofs consecutive from a
+    multiple of 3, as the DM numbers them), of which ``free`` (n, 12) are not constrained, to a matrix whose ownership
+    range is
+    ``owned`` (first, last + 1), row by row: the entries of the rows this rank owns summed per matrix entry (the map
+    from the cells' entries to the rows' is found once, per 3 x 3 block of a pair of vertices) and set as whole rows
+    (PETSc's MatSetValues merges a sorted row in one pass, where a cell's 12 x 12 block takes 144 searches); the rows
+    other ranks own (of a vertex this rank shares) as cell blocks, whose owned rows are left out. A constrained dof's
+    row and column take zeros (the operator's are the identity's)."""
 
-    def __init__(self, gdofs: np.ndarray, owned: tuple[int, int]) -> None:
-        n = len(gdofs)
+    def __init__(self, gdofs: np.ndarray, free: np.ndarray, owned: tuple[int, int]) -> None:
         first, last = owned
-        rows = np.repeat(gdofs, 12, axis=1).reshape(n, 144).astype(np.int64)
-        cols = np.tile(gdofs, (1, 12)).reshape(n, 144).astype(np.int64)
-        mine = (rows >= first) & (rows < last) & (cols >= 0)
-        width = int(max(cols.max(initial=0), 0)) + 1
-        self.take = np.flatnonzero(mine.ravel())
-        keys, self.slot = np.unique((rows.ravel()[self.take] - first) * width + cols.ravel()[self.take],
-                                    return_inverse=True)
-        self.slot = self.slot.ravel()
-        self.cols = (keys % width).astype(PETSc.IntType)
-        counts = np.bincount(keys // width, minlength=last - first)
-        self.indptr = np.concatenate([[0], np.cumsum(counts)]).astype(PETSc.IntType)
-        shared = ((rows >= 0) & ((rows < first) | (rows >= last))).any(axis=1)
-        self.shared = np.flatnonzero(shared)
-        g = gdofs[self.shared]
-        self.shared_rows = np.where((g >= first) & (g < last), -1, g).astype(PETSc.IntType)
+        block = np.asarray(gdofs, np.int64).reshape(-1, 4, 3)[:, :, 0] // 3           # each vertex's block
+        n = len(block)
+        self.free = np.asarray(free, float)
+        mine = (block >= first // 3) & (block < last // 3)                              # (n, 4) rows owned
+        rb = np.repeat(block, 4, axis=1).reshape(n, 4, 4)
+        cb = np.tile(block, (1, 4)).reshape(n, 4, 4)
+        width = int(block.max(initial=0)) + 1
+        take = np.repeat(mine, 4, axis=1).reshape(n, 4, 4)
+        keys, inverse = np.unique((rb[take] - first // 3) * width + cb[take], return_inverse=True)
+        rows, cols = keys // width, keys % width                                        # block pairs, sorted
+        per_row = np.bincount(rows, minlength=(last - first) // 3)
+        start = np.cumsum(per_row) - per_row                                            # a row block's first pair
+        pair = np.zeros((n, 4, 4), np.int64)
+        pair[take] = inverse.ravel()
+        r = rows[pair]
+        # the value slot of the entry (cell, a, i, b, j): 9 start + i 3 npairs + 3 (pair - start) + j
+        base = 9 * start[r] + 3 * (pair - start[r])
+        i = np.arange(3)[None, None, :, None, None]
+        j = np.arange(3)[None, None, None, None, :]
+        slot = base[:, :, None, :, None] + i * (3 * per_row[r])[:, :, None, :, None] + j
+        mask = np.broadcast_to(take[:, :, None, :, None], slot.shape)
+        self.take = np.flatnonzero(mask.ravel())
+        self.slot = slot[mask]
+        self.indptr, self.cols = _block_csr(cols, per_row)
+        self.shared = np.flatnonzero((~mine).any(axis=1))
+        g = np.where(np.asarray(free)[self.shared], gdofs[self.shared], -1)               # -1: left out
+        row_owned = np.repeat(mine[self.shared], 3, axis=1)
+        self.shared_rows = np.where(row_owned, -1, g).astype(PETSc.IntType)
         self.shared_cols = g.astype(PETSc.IntType)
 
     def add(self, mat: Any, blocks: np.ndarray) -> None:
         """Add the cells' element matrices ``blocks`` (n, 12, 12) to ``mat``."""
-        flat = blocks.reshape(-1)
-        values = np.bincount(self.slot, weights=flat[self.take], minlength=len(self.cols))
+        free = self.free
+        masked = blocks * free[:, :, None] * free[:, None, :]
+        values = np.bincount(self.slot, weights=masked.reshape(-1)[self.take], minlength=len(self.cols))
         mat.setValuesCSR(self.indptr, self.cols, values, addv=ADD)
         if len(self.shared):
             mat.setValuesRCV(self.shared_rows, self.shared_cols, blocks[self.shared].reshape(-1, 144), addv=ADD)
+
+
+def _block_csr(cols: np.ndarray, per_row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The point CSR (indptr, column indices) of the 3 x 3 blocks whose column blocks ``cols`` are listed row block
+    by row block (``per_row`` of them each, sorted): each row block's three rows take 3 columns per column block."""
+    row_block = np.repeat(np.arange(len(per_row)), per_row)
+    pos_in_row = np.arange(len(cols)) - np.repeat(np.cumsum(per_row) - per_row, per_row)
+    offset = 9 * (np.cumsum(per_row) - per_row)
+    # value index of (pair k, row i, column j): offset[rb] + i * 3 n[rb] + 3 pos + j
+    i, j = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    index = (offset[row_block][:, None, None] + i[None] * (3 * per_row[row_block])[:, None, None]
+             + 3 * pos_in_row[:, None, None] + j[None]).ravel()
+    out = np.empty(9 * len(cols), PETSc.IntType)
+    out[index] = (3 * np.repeat(cols, 9).reshape(-1, 3, 3) + j[None]).ravel()
+    counts = np.repeat(3 * per_row, 3)
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(PETSc.IntType)
+    return indptr, out

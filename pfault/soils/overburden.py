@@ -24,8 +24,13 @@ from .columns import nudged
 def face_neighbours(tets: np.ndarray) -> np.ndarray:
     """(nc, 4): the cell across the face opposite each local vertex of every cell (-1 on the mesh's boundary)."""
     nc = len(tets)
-    faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1)
-    _, inverse, counts = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
+    faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1).astype(np.int64)
+    nv = int(tets.max(initial=0)) + 1
+    if nv ** 3 < 2 ** 62:                  # a face as one integer: np.unique of rows is slower
+        faces = (faces[:, 0] * nv + faces[:, 1]) * nv + faces[:, 2]
+        _, inverse, counts = np.unique(faces, return_inverse=True, return_counts=True)
+    else:
+        _, inverse, counts = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     order = np.argsort(inverse, kind="stable")
     out = np.full(nc * 4, -1, np.int64)

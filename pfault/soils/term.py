@@ -57,12 +57,11 @@ class SoilTerm:
         self.free = free[dofs]
         g = (to_global(dofs.ravel().astype(PETSc.IntType)).reshape(dofs.shape) if dofs.size
              else np.zeros(dofs.shape, np.int64))
-        self.gdofs = np.where(self.free, g, -1).astype(PETSc.IntType)
         self.lame = lame
         self.n = len(soil.cells)
         # the part of the cells' tangent stiffness a shear modulus multiplies, constant: kept (1.2 kB per cell)
         self.shear = blocks.shear_stiffness(grad, vol)
-        self.matrix_rows = blocks.CellRows(self.gdofs, owned)
+        self.matrix_rows = blocks.CellRows(g, self.free, owned)
         self._last: tuple | None = None     # the last step of the law (``step``)
 
     # -- the operator and the loads ------------------------------------------------------------------
