@@ -88,8 +88,9 @@ class SoilColumns:
         x, g = corners[self.cell], term.grad[self.cell]
         self.weights = 1.0 + np.einsum("nik,nik->ni", g, mid[:, None, :] - x)
         # each soil cell's vertices as keys of the recovery: (serial vertex, fault side, layer), over every rank
-        key = ((mesh.vert_serial[mesh.cells[soil.cells]] * (int(mesh.cell_side.max(initial=0)) + 1)
-                + mesh.cell_side[soil.cells]) * self.n_layers + soil.layer[:, None]).astype(np.int64)
+        sides = self.mpi.allreduce(int(mesh.cell_side.max(initial=0)), op=MPI.MAX) + 1
+        key = ((mesh.vert_serial[mesh.cells[soil.cells]].astype(np.int64) * sides + mesh.cell_side[soil.cells])
+               * self.n_layers + soil.layer[:, None])
         mpi_keys = np.unique(np.concatenate(self.mpi.allgather(np.unique(key))))
         self.key = np.searchsorted(mpi_keys, key)
         self.n_keys = len(mpi_keys)

@@ -21,7 +21,7 @@ CASES = {
     "preconsolidation_below_the_initial_stress": (
         ["-pfault_material_clay1_overconsolidation_ratio", None, "-pfault_material_clay1_preconsolidation_stress",
          "100*kPa"],
-        "-pfault_material_clay1_preconsolidation_stress: 34 of 54 cells of 'clay1' start above their "
+        "-pfault_material_clay1_preconsolidation_stress: 36 of 54 cells of 'clay1' start above their "
         "preconsolidation"),
     "symmetric_krylov": (["-pfault_solver", "gamg"], "-ksp_type cg: a method for symmetric operators, and the "
                                                       "materials with memory (clay1, sand, clay2) give a non-symmetric "
