@@ -12,9 +12,16 @@ from petsc4py import PETSc
 ADD = PETSc.InsertMode.ADD_VALUES
 
 
+def cell_strain(grad: np.ndarray, ue: np.ndarray) -> np.ndarray:
+    """The P1 strain (n,3,3) of cells with shape-function gradients ``grad`` (n,4,3) and vertex displacements
+    ``ue`` (n,4,3) (pfault.physics.elasticity.strain, with batched matrix products)."""
+    h = np.matmul(ue.transpose(0, 2, 1), grad)                   # du_i/dx_j
+    return 0.5 * (h + h.transpose(0, 2, 1))
+
+
 def cell_forces(grad: np.ndarray, vol: np.ndarray, stress: np.ndarray) -> np.ndarray:
-    """Nodal forces (n, 12) of a constant stress per cell (n,3,3): f_a = V sigma g_a."""
-    return (vol[:, None, None] * np.einsum("nij,naj->nai", stress, grad)).reshape(len(vol), 12)
+    """Nodal forces (n, 12) of a constant symmetric stress per cell (n,3,3): f_a = V sigma g_a."""
+    return (np.matmul(grad, stress) * vol[:, None, None]).reshape(len(vol), 12)
 
 
 def shear_stiffness(grad: np.ndarray, vol: np.ndarray) -> np.ndarray:
@@ -37,10 +44,12 @@ def tangent_stiffness(grad: np.ndarray, vol: np.ndarray, a: np.ndarray, mu: np.n
     (with a = K I it is pfault.physics.elasticity.stiffness's matrix, lambda = K - 2 mu/3); not symmetric where a is
     not a multiple of I. ``shear``: the cells' ``shear_stiffness`` if kept (else computed)."""
     n = len(vol)
-    tilde = a - (2.0 / 3.0) * mu[:, None, None] * np.eye(3)
+    tilde = np.array(a, dtype=float, copy=True)
+    for i in range(3):
+        tilde[:, i, i] -= (2.0 / 3.0) * mu
     ag = np.matmul(grad, tilde) * vol[:, None, None]             # (A g_a)_i: A symmetric
-    k = ag.reshape(n, 12, 1) * grad.reshape(n, 1, 12)
-    k += mu[:, None, None] * (shear_stiffness(grad, vol) if shear is None else shear)
+    k = np.matmul(ag.reshape(n, 12, 1), grad.reshape(n, 1, 12))
+    k += (shear_stiffness(grad, vol) if shear is None else shear) * mu[:, None, None]
     return k
 
 
@@ -58,7 +67,6 @@ class CellRows:
         first, last = owned
         block = np.asarray(gdofs, np.int64).reshape(-1, 4, 3)[:, :, 0] // 3           # each vertex's block
         n = len(block)
-        self.free = np.asarray(free, float)
         mine = (block >= first // 3) & (block < last // 3)                              # (n, 4) rows owned
         rb = np.repeat(block, 4, axis=1).reshape(n, 4, 4)
         cb = np.tile(block, (1, 4)).reshape(n, 4, 4)
@@ -76,21 +84,21 @@ class CellRows:
         i = np.arange(3)[None, None, :, None, None]
         j = np.arange(3)[None, None, None, None, :]
         slot = base[:, :, None, :, None] + i * (3 * per_row[r])[:, :, None, :, None] + j
-        mask = np.broadcast_to(take[:, :, None, :, None], slot.shape)
-        self.take = np.flatnonzero(mask.ravel())
+        free = np.asarray(free, bool)
+        f3 = free.reshape(n, 4, 3)
+        mask = take[:, :, None, :, None] & f3[:, :, :, None, None] & f3[:, None, None, :, :]
+        self.take = np.flatnonzero(mask.ravel())          # (a constrained dof's entries: zero, left out)
         self.slot = slot[mask]
         self.indptr, self.cols = _block_csr(cols, per_row)
         self.shared = np.flatnonzero((~mine).any(axis=1))
-        g = np.where(np.asarray(free)[self.shared], gdofs[self.shared], -1)               # -1: left out
+        g = np.where(free[self.shared], gdofs[self.shared], -1)                           # -1: left out
         row_owned = np.repeat(mine[self.shared], 3, axis=1)
         self.shared_rows = np.where(row_owned, -1, g).astype(PETSc.IntType)
         self.shared_cols = g.astype(PETSc.IntType)
 
     def add(self, mat: Any, blocks: np.ndarray) -> None:
         """Add the cells' element matrices ``blocks`` (n, 12, 12) to ``mat``."""
-        free = self.free
-        masked = blocks * free[:, :, None] * free[:, None, :]
-        values = np.bincount(self.slot, weights=masked.reshape(-1)[self.take], minlength=len(self.cols))
+        values = np.bincount(self.slot, weights=blocks.reshape(-1)[self.take], minlength=len(self.cols))
         mat.setValuesCSR(self.indptr, self.cols, values, addv=ADD)
         if len(self.shared):
             mat.setValuesRCV(self.shared_rows, self.shared_cols, blocks[self.shared].reshape(-1, 144), addv=ADD)

@@ -148,7 +148,7 @@ class SoilTerm:
     # -- the law -----------------------------------------------------------------------------------
     def strain(self, x_loc: np.ndarray) -> np.ndarray:
         """The P1 strain (n,3,3) of every cell of the term at the state x_loc."""
-        return el.strain(self.grad, x_loc[self.dofs].reshape(-1, 4, 3))
+        return blocks.cell_strain(self.grad, x_loc[self.dofs].reshape(-1, 4, 3))
 
     def step(self, x_loc: np.ndarray, history: SoilMemory, configuration: np.ndarray | None = None) -> tuple:
         """The law's step from the remembered state to x_loc: (law history, branch, tangent). The last step is
