@@ -103,3 +103,20 @@ def test_faults_and_soils_together(faulted, tmp_path):
     _, s = run_scene(faulted, part, ranks=2, extra=[*EXACT, "-pfault_restart", str(part)])
     assert s["completed_steps"] == [1, 2, 3, 4]
     compare_runs(tmp_path / "r2", part, 1e-10)
+
+
+def test_flow_model_with_soils(tmp_path):
+    """The flow model with a material with memory (the flow box's soil given indices, no drained modulus): its default
+    specific storage is its cells' elastic skeletal storage at their reference modulus (it was NaN before: the flow's
+    solve diverged), and the drawdown compacts it on the virgin line."""
+    from conftest import FLOW_BOX
+    scene = FLOW_BOX.replace("-pfault_material_soil_young_modulus 10*MPa",
+                             "-pfault_material_soil_compression_index 0.2\n-pfault_material_soil_recompression_index "
+                             "0.03\n-pfault_material_soil_void_ratio 0.8\n-pfault_material_soil_density 2000\n"
+                             "-pfault_geostatic true")
+    path = tmp_path / "flow_soil.opts"
+    path.write_text(scene + "-pfault_time_end 2*day\n-pfault_time_steps 2\n")
+    _, s = run_scene(str(path), tmp_path / "out")
+    steps = [r for r in s["steps"] if not r.get("initial")]
+    assert s["converged"] and steps[-1]["cells_virgin"] == 48 and steps[-1]["max_drawdown_m"] > 0
+    assert 0 < s["max_subsidence_inelastic_m"] < s["max_subsidence_m"]
