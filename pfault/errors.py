@@ -240,13 +240,6 @@ def write_line(text: str) -> None:
     sys.stderr.flush()
 
 
-def warn(comm: Any, text: str) -> None:
-    """``pfault: warning: TEXT`` on stderr, once (by rank 0 of ``comm``): a run that goes on, with something
-    the user must know."""
-    if _mpi(comm).rank == 0:
-        write_line(f"pfault: warning: {text}")
-
-
 class RunGuard:
     """Ends a failed run on every rank. Created by every rank at the start of a run (it duplicates the
     communicator, so its barrier cannot be confused with a collective call the others are waiting in)."""
