@@ -31,6 +31,8 @@ from .columns import SoilColumns
 from .cells import SoilCells
 from .history import SoilLoad, SoilMemory
 
+ON_CAP = 1e-9   # relative: a cell whose mean effective stress is within this share of its preconsolidation is on it
+
 
 class SoilTerm(TermDefaults):
     """The law with memory in the local cells ``soil`` (pfault.soils.cells.SoilCells) of a mesh with ``n_cells``
@@ -243,6 +245,18 @@ class SoilTerm(TermDefaults):
         only (``residual_rate``: TermDefaults). No part of its own has a margin: a layer's critical head and its
         margin are its reports (pfault.soils.measures)."""
         return SoilLoad(np.asarray(cell_rate, float)[self.soil.cells])
+
+    def margin_configuration(self, x_loc: np.ndarray, load: SoilLoad, history: SoilMemory) -> np.ndarray:
+        """The branches of the response to a further drawdown from the converged state x_loc: the virgin line in
+        the cells on their cap (p' = p'_c to ON_CAP: normally consolidated, or compacting in the last step), which a
+        further compression loads inelastically, the swelling line elsewhere. The state's own configuration is the
+        swelling line everywhere (no strain since it was reached: ``configuration``), which is the tangent of an
+        unloading and Cc/Cr times too stiff for a cell that compacts."""
+        if not history.started:
+            return np.full(self.n, sl.ELASTIC)
+        new, _, _ = self.step(x_loc, history)
+        on_cap = sl.mean_stress(new.stress) >= new.preconsolidation * (1.0 - ON_CAP)
+        return np.where(on_cap, sl.VIRGIN, sl.ELASTIC)
 
     # -- the checkpoint ------------------------------------------------------------------------------
     def history_arrays(self, history: SoilMemory) -> dict:

@@ -228,13 +228,13 @@ class StepSolver:
         ksp.solve(b, x)
         return int(ksp.getConvergedReason())
 
-    def solve_response(self, rhs: Any, du: Any) -> tuple[bool, SolveCost]:
-        """Solve J du = rhs with the Jacobian of the converged state in its configuration (every term keeps its
-        state: a fault's faces stuck, slipping or open) on the step's KSP: the direct solver's factors are kept
+    def solve_response(self, rhs: Any, du: Any, config: tuple | None = None) -> tuple[bool, SolveCost]:
+        """Solve J du = rhs with the Jacobian of the converged state in the terms' configuration ``config`` (None:
+        the state's; a fault's faces stuck, slipping or open) on the step's KSP: the direct solver's factors are kept
         when they are of that Jacobian or the factor reuse keeps them, refactored otherwise. The Krylov solve stops
         at -ksp_rtol of |rhs| (the step's absolute tolerance is for its forces). Returns (converged, its cost)."""
         eq, t0, nfact, njac = self.eq, time.perf_counter(), factorizations(), self.eq.n_jacobians
-        self._jacobian(self.snes, self.state.u, eq.J, eq.J)
+        self._jacobian(self.snes, self.state.u, eq.J, eq.J, config or None)
         ksp = self.snes.getKSP()
         ksp.setOperators(eq.J, eq.J)
         rtol, atol, divtol, max_it = ksp.getTolerances()

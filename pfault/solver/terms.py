@@ -47,6 +47,9 @@ The protocol (methods a term has; collective where it says so):
   linear response of a converged state): ``load_rate(t, cell_dp, cell_rate, alpha, out)`` the rate of its load
   per metre of drawdown (``cell_rate``: Pa/m per local cell), adding the rate of its share of f to ``out``;
   ``residual_rate(x_loc, load, rate, history, out)`` adds d(its residual)/d(drawdown) at the fixed state x_loc;
+  ``margin_configuration(x_loc, load, history)`` the configuration the response's Jacobian takes (the branches a
+  further drawdown takes from x_loc: a fault's faces keep their states, a soil's cells on their cap compact on
+  the virgin line);
   ``margin_parts(x_loc, load, history)`` how many of its parts, on all ranks, have a margin the response decides
   (a fault's faces stuck and not broken; none: the response is not solved); collective;
   ``margins(x_loc, dx_loc, load, rate, history, mesh, settings)`` its margins at x_loc with the state's rate dx_loc
@@ -142,12 +145,15 @@ class Term(Protocol):
     def margins(self, x_loc: np.ndarray, dx_loc: np.ndarray, load: Any, rate: Any, history: Any, mesh: Any,
                 settings: MarginSettings) -> Any: ...
 
+    def margin_configuration(self, x_loc: np.ndarray, load: Any, history: Any) -> np.ndarray: ...
+
 
 class TermDefaults:
     """The answers of a term that adds nothing to a part of the protocol (a term class derives from it and
     defines the rest): no Jacobian entries beyond its own blocks' pattern, no initial vertical stress of its own,
     no strain or stress given to cells, nothing to settle, nothing along columns; for the margins to failure a
-    residual that does not depend on the load at a fixed state and no part with a margin of its own."""
+    residual that does not depend on the load at a fixed state, the response in its current configuration and no
+    part with a margin of its own."""
 
     full_newton_steps = True    # its semismooth Newton takes full steps (pfault.solver.setup.apply_solver_defaults)
 
@@ -173,6 +179,10 @@ class TermDefaults:
 
     def residual_rate(self, x_loc: np.ndarray, load: Any, rate: Any, history: Any, out: np.ndarray) -> None:
         """Nothing: at a fixed state its residual does not depend on the drawdown."""
+
+    def margin_configuration(self, x_loc: np.ndarray, load: Any, history: Any) -> np.ndarray:
+        """Its configuration at x_loc: a further drawdown keeps its branches."""
+        return self.configuration(x_loc, load, history)
 
     def margin_parts(self, x_loc: np.ndarray, load: Any, history: Any) -> int:
         return 0
