@@ -44,6 +44,7 @@ class Georef:
     (None: times are seconds from the start only)."""
     crs: Any = None
     start: dt.datetime | None = None
+    crs_file: str = ""          # the .prj/.wkt file -pfault_crs named ('': a code or a WKT string)
 
     @property
     def wkt(self) -> str:
@@ -110,7 +111,9 @@ def read_georef(reader: Any, scene_file: str = "") -> Georef:
     text = reader.get("pfault_crs")
     start = reader.get("pfault_start_date")
     crs = parse_crs(text, OPTION, scene_file) if text else None
-    return Georef(crs, parse_date(start, "-pfault_start_date") if start else None)
+    path = beside_scene(text.strip(), scene_file) if text else ""
+    return Georef(crs, parse_date(start, "-pfault_start_date") if start else None,
+                  path if path and os.path.isfile(path) else "")
 
 
 def same_crs(a: Any, b: Any) -> bool:

@@ -39,14 +39,15 @@ CHANGED_OPTION = "pfault_restart_changed_inputs"
 MAY_DROP = ("pfault_stations",)
 # the options that name a data file (besides the material properties given as field:FILE); the other options that
 # name a path name no data (tests/unit/test_data_files.py keeps the two lists complete)
-FILE_OPTIONS = ("pfault_mesh_file", "pfault_heads_file", "pfault_heads_grid", "pfault_stations")
+FILE_OPTIONS = ("pfault_mesh_file", "pfault_heads_file", "pfault_heads_grid", "pfault_stations", "pfault_crs",
+                "pfault_insar_grid")
 
 
 def scene_files(scene: Any, stations_file: str, scene_file: str) -> list[tuple[str, str]]:
     """(option, path) of every data file the run of ``scene`` (pfault.model.Scene) reads, each path as its reader
     found it: the mesh, the heads and their grid, the material properties' fields (found beside the scene file
-    ``scene_file`` as pfault.materials.properties.read_fields finds them) and the stations (``stations_file``, '' for
-    none)."""
+    ``scene_file`` as pfault.materials.properties.read_fields finds them), the stations (``stations_file``, '' for
+    none) and the CRS's .prj/.wkt file."""
     files = []
     if scene.settings.mesh_file:
         files.append(("pfault_mesh_file", scene.settings.mesh_file))
@@ -59,6 +60,8 @@ def scene_files(scene: Any, stations_file: str, scene_file: str) -> list[tuple[s
               for ref in field_refs(scene.materials, scene.flow_settings, scene.soils)]
     if stations_file:
         files.append(("pfault_stations", stations_file))
+    if scene.georef is not None and scene.georef.crs_file:      # a .prj/.wkt file (heads in another CRS are reprojected by it)
+        files.append(("pfault_crs", scene.georef.crs_file))
     return files
 
 

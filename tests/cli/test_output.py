@@ -160,7 +160,7 @@ def test_stop_signal_before_the_time_loop_is_one_line(tmp_path, sig):
     proc = subprocess.Popen(command(["-m", "pfault", OEDOMETER, "-pfault_box_cells", "30,30,30",
                                      "-pfault_output_dir", str(run_dir)], 1),
                             cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(1.0)
+    wait_for_handler(proc.pid, signal.SIGUSR1)      # pfault's own handlers are in place (however busy the machine)
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=TIMEOUT)
     assert proc.returncode == 7, out + err
@@ -168,6 +168,20 @@ def test_stop_signal_before_the_time_loop_is_one_line(tmp_path, sig):
     assert err.splitlines() == [f"pfault: stopped: {sig.name} outside the time loop (start-up, meshing, setup, or the "
                                 "figures at the end): the run stopped at once; every step it completed is on disk"]
     assert not run_dir.exists() and not [f for f in os.listdir(tmp_path) if ".pfault-" in f]
+
+
+def wait_for_handler(pid, sig, timeout=TIMEOUT):
+    """Waits until process ``pid`` catches ``sig`` (its SigCgt mask in /proc/PID/status): python -m pfault installs
+    its stop handlers first thing, so from then on a signal meets pfault's handling, not the interpreter's start."""
+    bit = 1 << (int(sig) - 1)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        with open(f"/proc/{pid}/status") as fh:
+            caught = next(int(line.split()[1], 16) for line in fh if line.startswith("SigCgt:"))
+        if caught & bit:
+            return
+        time.sleep(0.01)
+    raise AssertionError(f"process {pid} did not install a handler of {sig.name} within {timeout} s")
 
 
 def completed_on_disk(run_dir):

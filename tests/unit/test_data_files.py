@@ -3,11 +3,14 @@ directory (not 'no such file'), and the record of the files (pfault.provenance: 
 with a continued run's own, with the line that ends a continued run whose files changed."""
 
 import hashlib
+from types import SimpleNamespace
 
 import pytest
+from pyproj import CRS
 
 from pfault import provenance
 from pfault.errors import InputError
+from pfault.georef import read_georef
 from pfault.io.stations import read_stations
 from pfault.materials.field_files import read_field
 from pfault.mesh.gmsh_io import read_msh
@@ -22,7 +25,8 @@ from pfault.tools.calibration_input import CalibrationInputError, read_parameter
 NOT_DATA = {"pfault_scene": "a name", "pfault_output_dir": "the output directory",
             "pfault_ground_surface": "a surface of the mesh", "pfault_heads_time_unit": "a unit",
             "pfault_solver": "an options file (its options are in options.txt)",
-            "pfault_restart": "a run directory (checked by its checkpoint)"}
+            "pfault_restart": "a run directory (checked by its checkpoint)",
+            "pfault_start_date": "a calendar date"}
 
 
 def test_every_option_that_names_a_data_file_is_recorded():
@@ -107,3 +111,24 @@ def test_differences_and_the_line_that_names_them():
     gone = provenance.differences(then[:2], then[1:2])
     assert provenance.changed_message("run", gone).startswith(
         "-pfault_restart run: that run read -pfault_mesh_file /a/m.msh, this one reads no file for it;")
+
+
+def test_a_crs_file_is_a_data_file(tmp_path):
+    """-pfault_crs given as a .prj file (beside the scene) is recorded like the other data files: heads in another
+    CRS are reprojected by it, so a restart with it changed must not go on quietly; an EPSG code names no file."""
+    (tmp_path / "site.prj").write_text(CRS.from_epsg(32650).to_wkt())
+    scene_file = str(tmp_path / "scene.opts")
+
+    class Reader:
+        def __init__(self, crs):
+            self.values = {"pfault_crs": crs, "pfault_start_date": ""}
+
+        def get(self, name):
+            return self.values[name]
+
+    by_file = read_georef(Reader("site.prj"), scene_file)
+    assert by_file.crs.to_epsg() == 32650 and by_file.crs_file == str(tmp_path / "site.prj")
+    assert read_georef(Reader("EPSG:32650"), scene_file).crs_file == ""
+    scene = SimpleNamespace(settings=SimpleNamespace(mesh_file=""), heads_settings=None, materials={},
+                            flow_settings=None, georef=by_file)
+    assert provenance.scene_files(scene, "", scene_file) == [("pfault_crs", str(tmp_path / "site.prj"))]
