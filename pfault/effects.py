@@ -32,6 +32,7 @@ EVENTS = {
     "geostatic": ("pfaultGeostatic",),
     "tractions": ("pfaultTractionLoad",),
     "displacements": ("pfaultDisplacementLoad",),
+    "soils": ("pfaultSoilSetup", "pfaultSoilResidual", "pfaultSoilJacobian"),
 }
 
 
@@ -60,6 +61,7 @@ class Effects:
     displacements: tuple   # surfaces with prescribed displacements
     heads: str = ""        # the groundwater model's head file (-pfault_heads_file), or ""
     unchanged: tuple = ()  # materials whose pore pressure does not change (-pfault_pore_pressure_unchanged_materials)
+    soils: tuple = ()      # materials with memory (pfault.soils)
 
     def on(self, name: str) -> bool:
         return bool(getattr(self, name))
@@ -87,17 +89,17 @@ class Effects:
         label = {"faults": "faults", "flow": "groundwater flow", "pressure_tables": "pore-pressure tables",
                  "geostatic": "geostatic start", "tractions": "boundary tractions",
                  "displacements": "prescribed displacements",
-                 "heads": "groundwater-model heads"}
+                 "heads": "groundwater-model heads", "soils": "materials with memory"}
         parts = [f"{label[k]} {self.detail(k) if self.on(k) else 'off'}" for k in EVENTS]
         return "effects: " + "; ".join(parts)
 
 
 def decide(settings: Settings, materials: Sequence[Material], drawdown: MaterialDrawdown, flow: bool,
            faults: Iterable[FaultSettings], boundaries: Iterable[Boundary], heads: str = "",
-           unchanged: Iterable[str] = ()) -> Effects:
+           unchanged: Iterable[str] = (), soils: tuple = ()) -> Effects:
     """Effects of a scene from its settings: the material names, the drawdown tables, whether the flow model is
-    on, the fault settings, the boundary conditions, the head file of a groundwater model ("" without) and the
-    materials whose pore pressure does not change."""
+    on, the fault settings, the boundary conditions, the head file of a groundwater model ("" without), the
+    materials whose pore pressure does not change and the materials with memory."""
     tables = tuple(m.name for m, tab in zip(materials, drawdown.tables) if tab is not None)
     return Effects(faults=tuple((f.name, f.method) for f in faults), flow=bool(flow), pressure_tables=tables,
                    geostatic=settings.geostatic_stress if settings.geostatic else "",
@@ -105,7 +107,7 @@ def decide(settings: Settings, materials: Sequence[Material], drawdown: Material
                                    if b.kind in ("traction", "displacement") and any(b.traction)),
                    displacements=tuple(b.name for b in boundaries
                                        if b.kind == "displacement" and any(b.displacement)),
-                   heads=heads, unchanged=tuple(unchanged))
+                   heads=heads, unchanged=tuple(unchanged), soils=tuple(soils))
 
 
 def event_total(name: str, key: str = "time") -> float:

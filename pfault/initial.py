@@ -3,11 +3,13 @@
 The vertical stress is that of an elastic gravity solve with the faults glued (every fault face stuck: no jump
 while the state forms; the overburden in flat layers, the arching around stiff bodies), or with
 -pfault_geostatic_stress lithostatic the weight of the column above each cell (pfault.physics.geostatic.overburden,
-no solve); the horizontal stresses follow the K0 rule on effective stresses, sigma'_h = K0 sigma'_v, with
-hydrostatic pore pressure below the water table (K0 = -pfault_geostatic_k0, default nu/(1-nu) of each material);
-no initial shear. That stress is the initial state: it loads nothing, displacements are those caused by the
-drawdown, and stresses and fault tractions are the initial ones plus the changes; the terms' histories start from
-it (a fault face's initial traction is the prestress projected on it).
+no solve), except in the cells of a material with memory, whose vertical stress is the weight of the column above
+them either way (the K0 procedure: pfault.soils.term.SoilTerm.initial_vertical_stress); the horizontal stresses
+follow the K0 rule on effective stresses, sigma'_h = K0 sigma'_v, with hydrostatic pore pressure below the water
+table (K0 = -pfault_geostatic_k0, default nu/(1-nu) of each material); no initial shear. That stress is the initial
+state: it loads nothing, displacements are those caused by the drawdown, and stresses and fault tractions are the
+initial ones plus the changes; the terms' histories start from it (a fault face's initial traction is the
+prestress projected on it).
 """
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ def overburden(mpi: Any, cell_coords: np.ndarray, density: np.ndarray, gravity: 
     return mpi.scatter(run_on_root(mpi, columns))
 
 
-
 class GeostaticStart:
     """Computes the geostatic initial state of ``equations`` (pfault.solver.equations.Equations) into a
     state, with the linear solver ``solve_linear(A, b, x) -> KSP reason`` (the step solver's)."""
@@ -44,14 +45,29 @@ class GeostaticStart:
     def compute(self, state: Any, solve_linear: Any) -> None:
         """The initial stress (``state.sigma0``), the terms' histories from it, and u = u_ref: the initial state,
         in equilibrium with zero displacement."""
+        self.start(state, self.initial_stress(state, solve_linear))
+
+    def initial_stress(self, state: Any, solve_linear: Any) -> np.ndarray:
+        """The initial stress per local cell (cells x 3 x 3, Pa): the vertical stress of the elastic gravity solve
+        or the lithostatic column (-pfault_geostatic_stress), the terms' own where they give one (a material with
+        memory's overburden), and the K0 rule (pfault.physics.geostatic.k0_stress)."""
         eq, asm, s = self.eq, self.eq.asm, self.settings
         if s.geostatic_stress == "lithostatic":
             sigma_v = -overburden(eq.comm.tompi4py(), eq.mesh.coords[eq.mesh.cells], asm.density, s.gravity)
         else:
-            sigma_v = self.gravity_stress(state, solve_linear)[:, 2, 2]
+            sigma_v = self.gravity_stress(state, solve_linear)[:, 2, 2].copy()
+        for term in eq.terms:
+            cells, vertical = term.initial_vertical_stress()    # a material with memory's: its overburden
+            sigma_v[cells] = vertical
         nu = asm.lam / (2 * (asm.lam + asm.mu))
-        state.sigma0 = gs.k0_stress(sigma_v, asm.centroids[:, 2], asm.alpha, nu, s.k0, s.water_density, s.gravity,
-                                    s.water_table)
+        return gs.k0_stress(sigma_v, asm.centroids[:, 2], asm.alpha, nu, s.k0, s.water_density, s.gravity,
+                            s.water_table)
+
+    def start(self, state: Any, sigma0: np.ndarray) -> None:
+        """The initial state of the stress ``sigma0`` (per local cell): the terms' histories from it, and
+        u = u_ref, in equilibrium with zero displacement."""
+        eq = self.eq
+        state.sigma0 = sigma0
         eq.loads.set(0.0)       # the terms' loads back from gravity's to those of the start
         state.u.set(0.0)
         loc = eq.local_array(state.u)

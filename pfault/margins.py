@@ -4,7 +4,8 @@ takes before it fails (a fault face slips, opens or breaks), from the converged 
 The drawdown lam (m of head) lowers the pore pressure by rho_w g lam in every cell the pore-pressure source
 changes (``loaded_cells``, pfault.sources: the materials with a table that is not zero; every cell of the flow
 model; the cells of a groundwater model's heads that change at some saved time), the faces' own pore pressure with
-them. One linear solve with the step's Jacobian in its converged configuration gives the state's rate
+them. One linear solve with the step's Jacobian at the converged state, in the branches the drawdown takes (a
+fault's faces keep their states, a soil's cells on their cap compact on the virgin line), gives the state's rate
 (pfault.solver.response); each term turns it into its margins (pfault.faults.margins for the faults). The response
 is taken as linear up to a part's failure: nothing else fails first and redistributes the load
 (docs/theory.md, "Margins to failure").

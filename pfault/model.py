@@ -36,6 +36,9 @@ from .margins import read_margin_settings
 from .mesh.fault import split_faults
 from .georef import read_georef
 from .sources.heads import build_heads_source, check_heads_files, read_heads_settings, read_mesh_origin
+from .soils.cells import check_krylov, land_top, with_reference
+from .soils.overburden import initial_effective_stress
+from .soils.term import SoilTerm
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,7 @@ class Scene:
     unchanged_materials: tuple = ()         # materials whose pore pressure does not change
     georef: Any = None              # -pfault_crs, -pfault_start_date (pfault.georef.Georef)
     margins: Any = None             # what margins to failure report (pfault.solver.terms.MarginSettings), or None
+    soils: tuple = ()               # per material its law with memory (pfault.scene.Soil) or None; () with none
 
 
 @dataclass(frozen=True)
@@ -143,7 +147,8 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     names = comm.tompi4py().bcast((serial.material_names, sorted(serial.surfaces)) if comm.rank == 0 else None)
     material_names, surface_names = names
     scn.check_ground_surface(reader, s, surface_names)
-    materials = scn.read_materials(reader, material_names)
+    soils = scn.read_soils(reader, material_names, s.geostatic)
+    materials = scn.read_materials(reader, material_names, soil={m.name for m in soils if m is not None})
     drawdown = scn.read_drawdown(reader, material_names, s.water_density, s.gravity)
     if heads_settings is not None:
         _check_one_pressure_source(heads_settings, drawdown, reader.get("pfault_flow"))
@@ -162,19 +167,21 @@ def read_scene(comm: Any, reader: Any, options_file: str) -> tuple[Scene, Any]:
     contact = scn.read_contact_options(reader) if fault_names else None
     reader.check_pfault_options()
     warnings = tuple(warn(comm, text) for text in scn.time_table_warnings(reader, s))
+    soils = tuple(soils) if any(m is not None for m in soils) else ()
     effects = decide_effects(s, materials, drawdown, flow_settings is not None, fault_settings, boundaries,
-                             heads=heads_settings.file if heads_settings is not None else "", unchanged=unchanged)
+                             heads=heads_settings.file if heads_settings is not None else "", unchanged=unchanged,
+                             soils=tuple(m.name for m in soils if m is not None))
     scene = Scene(s, restart_dir, figures, solver_name, material_names, surface_names,
                   materials, drawdown, flow_settings, fault_settings, boundaries, contact, effects,
                   heads_settings, mesh_origin, warnings=warnings, unchanged_materials=unchanged, georef=georef,
-                  margins=margins)
+                  margins=margins, soils=soils)
     return scene, serial
 
 
 def _field_values(scene: Scene, serial: Any, options_file: str) -> tuple[dict, list]:
     """Rank 0: the material properties given as fields, on the serial cells ({option: values}; empty without
     fields), and the notes on how their files were read (pfault.materials.field_files.SpatialField.note)."""
-    refs = properties.field_refs(scene.materials, scene.flow_settings)
+    refs = properties.field_refs(scene.materials, scene.flow_settings, scene.soils)
     notes: list = []
     if not refs:
         return {}, notes
@@ -204,6 +211,11 @@ def _serial_arrays(scene: Scene, serial: Any, serial_values: dict) -> tuple:
     if fault_names:
         split = split_faults(serial, fault_names)
         cell = properties.CellProperties.of_cells(scene.materials, serial.cell_material, serial_values)
+        if scene.soils:
+            ground = out[2][:, 0] == 1
+            _, cell = with_reference(cell, list(scene.soils), serial.cell_material,
+                                     serial.points[serial.tets].mean(axis=1)[:, 2], land_top(serial.points, ground),
+                                     s, serial_values)
         topology = fault_topology(serial, split, cell.young_modulus)
     written = 1 + s.time_steps // s.output_every + (s.time_steps % s.output_every > 0)
     checks.check_output_space(s.output_dir, checks.output_bytes(
@@ -275,6 +287,48 @@ def fault_terms(scene: Scene, mesh: Any, dofmap: Any, assembler: Any, cell_props
         return (FaultTerm(faces, scene.fault_settings, topology, bubbles, pressure),)
 
 
+def serial_overburden(scene: Scene, serial: Any, serial_values: dict) -> np.ndarray:
+    """Rank 0: the initial vertical effective stress of every cell of the materials with memory (Pa, compression
+    positive; zero elsewhere), on the serial mesh: pfault.soils.overburden.initial_effective_stress."""
+    cell = properties.CellProperties.of_cells(scene.materials, serial.cell_material, serial_values)
+    soil = np.array([m is not None for m in scene.soils])[serial.cell_material]
+    out = np.zeros(len(serial.tets))
+    c = np.flatnonzero(soil)
+    out[c] = initial_effective_stress(serial.points, serial.tets, c, cell.density, cell.biot_coefficient,
+                                      scene.settings)
+    return out
+
+
+def _soil_cells(comm: Any, scene: Scene, serial: Any, mesh: Any, serial_values: dict, cell_props: Any) -> tuple:
+    """The local cells of the materials with memory (pfault.soils.cells.SoilCells), the cells' properties with their
+    reference modulus, and the overburden of every serial cell; (None, the properties, None) without them."""
+    if not scene.soils:
+        return None, cell_props, None
+    with logged("pfaultSoilSetup"):
+        overburden = comm.tompi4py().bcast(run_on_root(comm, serial_overburden, scene, serial, serial_values))
+        z = mesh.coords[mesh.cells].mean(axis=1)[:, 2]
+        top = land_top(mesh.coords, mesh.vert_data[:, 1] == 1, comm.tompi4py())
+        soil, cell_props = with_reference(cell_props, list(scene.soils), mesh.cell_material, z, top, scene.settings,
+                                          serial_values, mesh.cell_serial)
+    return soil, cell_props, overburden
+
+
+def soil_terms(soil: Any, mesh: Any, dofmap: Any, assembler: Any, overburden: np.ndarray | None) -> tuple:
+    """The term of the materials with memory (pfault.soils.term), none without them; ``overburden``: the weight of
+    the initial vertical effective stress of every serial cell (Pa; ``serial_overburden``)."""
+    if soil is None:
+        return ()
+    with logged("pfaultSoilSetup"):
+        c = soil.cells
+        free = ~constrained_local(mesh, dofmap)
+        v = mesh.dm.createGlobalVec()
+        owned = v.getOwnershipRange()
+        v.destroy()
+        return (SoilTerm(soil, len(mesh.cells), assembler.grad[c], assembler.vol[c], dofmap.cell_dofs[c], free,
+                         mesh.dm.getLGMap().apply, owned, (assembler.lam[c], assembler.mu[c]),
+                         overburden[mesh.cell_serial[c]], mesh.dm.getComm().tompi4py()),)
+
+
 def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     """The model of the scene in ``options_file`` (with the command line's options, through ``reader``)."""
     t0 = time.perf_counter()
@@ -289,10 +343,11 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
                              split=split)
     if scene.fault_settings:
         topology = comm.tompi4py().bcast(topology if comm.rank == 0 else None)
-    if comm.size > 1 and properties.field_refs(scene.materials, scene.flow_settings):
+    if comm.size > 1 and properties.field_refs(scene.materials, scene.flow_settings, scene.soils):
         serial_values = comm.tompi4py().bcast(serial_values if comm.rank == 0 else None)  # the fields' values
     cell_props = properties.CellProperties.of_cells(scene.materials, mesh.cell_material, serial_values,
                                                     mesh.cell_serial)
+    soil, cell_props, overburden = _soil_cells(comm, scene, serial, mesh, serial_values, cell_props)
     stage.pop()
     wall = {"mesh": time.perf_counter() - t0}
 
@@ -303,11 +358,13 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     dofmap = _dofmap(scene, mesh)
     faces = fields.face_rows(mesh, dofmap, len(fault_id))
     solver_file = _apply_solver(scene, mesh, options_file)
+    check_krylov(tuple(m.name for m in scene.soils if m is not None), PETSc.Options().getString("ksp_type", ""))
     source = None
     try:
-        assembler = ElasticAssembler(mesh, dofmap, cell_props)
+        assembler = ElasticAssembler(mesh, dofmap, cell_props, None if soil is None else soil.elastic(len(mesh.cells)))
         source = _source(scene, mesh, cell_props, serial_values)
         terms = fault_terms(scene, mesh, dofmap, assembler, cell_props, topology)
+        terms += soil_terms(soil, mesh, dofmap, assembler, overburden)
         equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, terms)
     except BaseException:
         # destroyed here, on every rank at once (the error is every rank's): left to the garbage collector,

@@ -90,6 +90,27 @@ SPECS = [
     _s("pfault_material_<material>_biot_coefficient", "property", 1.0, "", "Biot coefficient alpha"),
     _s("pfault_material_<material>_density", "property", 2000.0, "kg/m**3", "bulk (saturated) density, used "
        "by the geostatic initial stress"),
+    # materials with memory (pfault.physics.soil): compression indices or CSUB's head-based skeletal storage, instead
+    # of the drained modulus; declared before _specific_storage, whose suffix the storages share
+    _s("pfault_material_<material>_compression_index", "property", None, "", "compression index Cc, the slope of "
+       "the virgin line e - log10(sigma'_v): the material remembers its preconsolidation (with _recompression_index "
+       "and _void_ratio, instead of _young_modulus; needs -pfault_geostatic true)"),
+    _s("pfault_material_<material>_recompression_index", "property", None, "", "recompression (swelling) index Cr "
+       "< Cc, the slope of the unloading-reloading line e - log10(sigma'_v)"),
+    _s("pfault_material_<material>_inelastic_skeletal_specific_storage", "property", None, "1/m", "inelastic "
+       "skeletal specific storage Sskv (MODFLOW CSUB's SSV with HEAD_BASED): an oedometric column of thickness b "
+       "compacts by Sskv b dh past its preconsolidation head (with _elastic_skeletal_specific_storage, instead of "
+       "_young_modulus or the indices; needs -pfault_geostatic true)"),
+    _s("pfault_material_<material>_elastic_skeletal_specific_storage", "property", None, "1/m", "elastic skeletal "
+       "specific storage Sske < Sskv (CSUB's SSE): compaction Sske b dh above the preconsolidation head"),
+    _s("pfault_material_<material>_preconsolidation_stress", "property", None, "Pa", "preconsolidation of a "
+       "material with memory: the largest vertical effective stress it has borne, at least the initial one "
+       "(default: normally consolidated, the initial stress)"),
+    _s("pfault_material_<material>_overconsolidation_ratio", "property", None, "", "preconsolidation as OCR >= 1, "
+       "the preconsolidation over the initial vertical effective stress (instead of _preconsolidation_stress)"),
+    _s("pfault_material_<material>_preconsolidation_head", "property", None, "m", "preconsolidation as the lowest "
+       "head before, relative to the initial heads: 0 or negative, e.g. -5*m (CSUB's PCS0 with "
+       "INITIAL_PRECONSOLIDATION_HEAD; instead of _preconsolidation_stress)"),
     _s("pfault_material_<material>_head_drawdown", "table", None, "m", "drawdown of hydraulic head as "
        "time:value pairs, linear in between, the last value held after the last time (dp = -rho_w g h); "
        "positive is a drop"),
@@ -101,7 +122,7 @@ SPECS = [
     _s("pfault_material_<material>_specific_storage", "property", None, "1/m", "specific storage S_s (default: "
        "rho_w g (alpha c_M + n beta_w), c_M oedometric compressibility, n = e/(1+e), beta_w = 4.4e-10 1/Pa)"),
     _s("pfault_material_<material>_void_ratio", "property", 0.7, "", "void ratio e (porosity e/(1+e) in the "
-       "specific storage)"),
+       "specific storage); the initial void ratio e0 of the compression-index law, which needs it given"),
     # boundary conditions
     _s("pfault_bc_<surface>_type", "choice", "free", "", "boundary condition on a physical surface",
        choices=("free", "fixed", "roller", "traction", "displacement")),

@@ -56,8 +56,8 @@ def scene_files(scene: Any, stations_file: str, scene_file: str) -> list[tuple[s
         files.append(("pfault_heads_file", heads.file))
         if heads.grid:
             files.append(("pfault_heads_grid", heads.grid))
-    files += [(ref.option, beside_scene(ref.path, scene_file)) for ref in field_refs(scene.materials,
-                                                                                       scene.flow_settings)]
+    files += [(ref.option, beside_scene(ref.path, scene_file))
+              for ref in field_refs(scene.materials, scene.flow_settings, scene.soils)]
     if stations_file:
         files.append(("pfault_stations", stations_file))
     if scene.georef is not None and scene.georef.crs_file:      # a .prj/.wkt file (heads in another CRS are reprojected by it)

@@ -12,6 +12,17 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 
+def counts_text(counts: dict) -> str:
+    """The counts of the terms' configurations as the progress line and the Newton monitor print them: a fault's
+    faces stuck/slipping/open, a soil's cells compacting on the virgin line and the others."""
+    parts = []
+    if "stick" in counts:
+        parts.append(f"stick/slip/open {counts['stick']}/{counts['slip']}/{counts['open']}")
+    if "cells_virgin" in counts:
+        parts.append(f"virgin/elastic cells {counts['cells_virgin']}/{counts['cells_elastic']}")
+    return "  ".join(parts)
+
+
 @dataclass(frozen=True)
 class SolveCost:
     """Iterations, wall time, numeric factorisations and Jacobians of one solve or of several (``+``), and their
@@ -38,8 +49,8 @@ class Solve:
     """A solve at time ``time_s`` (or the solves of one step, combined): how it ended (SNES's ``reason``), its
     cost, and for nonlinear equations the predictor it started from, its absolute tolerance, the null pivots of a
     singular Jacobian, the sub-steps it was cut into, the solves again at its time after faces broke
-    (``breaking_passes``, ``faces_broken_step``) and the counts of each configuration (a fault's faces
-    stuck/slipping/open: ``counts``)."""
+    (``breaking_passes``, ``faces_broken_step``) and the counts of each term's configuration (a fault's faces
+    stuck/slipping/open, a soil's cells compacting on the virgin line: ``counts``, pfault.solver.terms)."""
     time_s: float
     converged: bool
     reason: int

@@ -89,11 +89,7 @@ class Stepper:
         with logged("pfaultGeostatic"):
             GeostaticStart(self.eq, self.model.settings).compute(self.state, self.solver.solve_linear)
         loc = self.eq.local_array(self.state.u)
-        counts = {}
-        if self.eq.terms:
-            config = np.concatenate(self.eq.configuration(self.state.u, self.state.histories, exact=False))
-            c = self.model.comm.tompi4py().allreduce(np.bincount(config, minlength=3), op=MPI.SUM)
-            counts = {"stick": int(c[0]), "slip": int(c[1]), "open": int(c[2])}
+        counts = self.eq.counts(self.state.u, self.state.histories)
         terms = self.terms_measures(loc, np.zeros_like(loc), at_rest=True)    # its own jumps: zero
         solve = Solve(0.0, True, 0, SolveCost(wall_s=time.perf_counter() - t0), counts=counts)
         return StepRecord(0, solve, terms=terms, initial=True, margins=self.initial_margins())
@@ -140,8 +136,11 @@ class Stepper:
         model = self.model
         u_rel = relative_displacement(model, self.state)
         sub, hor = surface_figures(model, u_rel)
-        terms = self.terms_measures(self.eq.local_array(self.state.u), u_rel)
-        hazard, surface = self.surface.measure(per_side(model, u_rel)) if due else ({}, None)
+        x_loc = self.eq.local_array(self.state.u)
+        terms = self.terms_measures(x_loc, u_rel)
+        hazard, surface = (self.surface.measure(per_side(model, u_rel), (x_loc, self.eq.loads.term_loads,
+                                                                         self.state.histories))
+                           if due else ({}, None))
         margins = self.margins.measure(self.state, solve.time_s) if due and solve.converged else None
         return StepRecord(step, solve, sub, hor, hazard or {}, terms, source, margins=margins), u_rel, surface
 

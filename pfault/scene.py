@@ -37,7 +37,7 @@ class Material:
     (pfault.materials.properties.FieldRef) interpolated at the cells' centroids; the model turns them into per-cell
     arrays (pfault.materials.properties)."""
     name: str
-    young_modulus: float | FieldRef
+    young_modulus: float | FieldRef | None          # None: a material with memory (pfault.physics.soil)
     poisson_ratio: float | FieldRef
     biot_coefficient: float | FieldRef
     density: float | FieldRef
@@ -172,18 +172,19 @@ def check_ground_surface(reader: OptionReader, settings: Settings, surface_names
                      f"{', '.join(surface_names) or '(none: the mesh has no physical surfaces)'}")
 
 
-def read_materials(reader: OptionReader, names: Iterable[str]) -> list[Material]:
-    """The materials' properties; a number is checked here, a field's values when its file is read."""
+def read_materials(reader: OptionReader, names: Iterable[str], soil: Collection[str] = ()) -> list[Material]:
+    """The materials' properties; a number is checked here, a field's values when its file is read. The materials
+    named in ``soil`` have a law with memory (``read_soils``) and no drained modulus (None)."""
     mats = []
     for name in names:
         p = f"pfault_material_{name}_"
-        e = reader.get(p + "young_modulus")
+        e = reader.get(p + "young_modulus") if name not in soil else None
         nu = reader.get(p + "poisson_ratio")
-        if e is None:
+        if e is None and name not in soil:
             raise InputError(f"missing -{p}young_modulus (Pa) for physical volume '{name}'")
         if nu is None:
             raise InputError(f"missing -{p}poisson_ratio for physical volume '{name}'")
-        if not is_field(e) and not e > 0:
+        if e is not None and not is_field(e) and not e > 0:
             raise InputError(f"-{p}young_modulus: must be positive, got {e}")
         if not is_field(nu) and not -1.0 < nu < 0.5:
             raise InputError(f"-{p}poisson_ratio: must lie in (-1, 0.5), got {nu}")
@@ -195,6 +196,127 @@ def read_materials(reader: OptionReader, names: Iterable[str]) -> list[Material]
             raise InputError(f"-{p}density: must be positive, got {rho}")
         mats.append(Material(name, e, nu, alpha, rho))
     return mats
+
+
+@dataclass(frozen=True)
+class Soil:
+    """A material with memory (pfault.physics.soil) as its options give it, numbers (SI) or fields: the
+    compression-index form (Cc, Cr, e0) or CSUB's head-based storage form (Sske, Sskv, 1/m), and its preconsolidation:
+    normal (normally consolidated), stress (sigma'_vc, Pa), ratio (OCR) or head (m, relative to the initial heads)."""
+    name: str
+    form: str                                        # index | storage
+    compression: float | FieldRef                    # Cc, or Sskv
+    recompression: float | FieldRef                  # Cr, or Sske
+    void_ratio: float | FieldRef | None              # e0 (index form)
+    preconsolidation: str = "normal"                 # normal | stress | ratio | head
+    preconsolidation_value: float | FieldRef | None = None
+
+
+SOIL_FORMS = {"index": ("compression_index", "recompression_index"),
+              "storage": ("inelastic_skeletal_specific_storage", "elastic_skeletal_specific_storage")}
+PRECONSOLIDATION = {"stress": "preconsolidation_stress", "ratio": "overconsolidation_ratio",
+                    "head": "preconsolidation_head"}
+
+
+def read_soils(reader: OptionReader, names: Iterable[str], geostatic: bool) -> list[Soil | None]:
+    """Per material its law with memory, or None: a material given none of these options stays linear elastic."""
+    return [_read_soil(reader, name, geostatic) for name in names]
+
+
+def _read_soil(reader: OptionReader, name: str, geostatic: bool) -> Soil | None:
+    p = f"pfault_material_{name}_"
+    given = {form: [reader.has(p + key) for key in keys] for form, keys in SOIL_FORMS.items()}
+    precon = [kind for kind, key in PRECONSOLIDATION.items() if reader.has(p + key)]
+    forms = [form for form, flags in given.items() if any(flags)]
+    if not forms:
+        if precon:
+            raise InputError(f"-{p}{PRECONSOLIDATION[precon[0]]}: '{name}' has no law with memory; give "
+                             f"-{p}compression_index and -{p}recompression_index (or CSUB's skeletal storages), or "
+                             "remove it")
+        return None
+    if len(forms) > 1:
+        raise InputError(f"-{p}compression_index and -{p}inelastic_skeletal_specific_storage: '{name}' takes the "
+                         "compression indices or CSUB's head-based skeletal storages, not both; keep one form")
+    form = forms[0]
+    first, second = SOIL_FORMS[form]
+    for key, flag in zip(SOIL_FORMS[form], given[form]):
+        if not flag:
+            other = second if key == first else first
+            raise InputError(f"missing -{p}{key} for '{name}', which has -{p}{other}: give both")
+    if reader.has(p + "young_modulus"):
+        raise InputError(f"-{p}young_modulus: '{name}' has -{p}{first}, whose stiffness follows from it and the "
+                         f"effective stress; remove the drained modulus (or the {form} law)")
+    if form == "index" and not reader.has(p + "void_ratio"):
+        raise InputError(f"missing -{p}void_ratio for '{name}': the initial void ratio e0 of its compression-index "
+                         "law (e.g. from the oedometer report)")
+    if not geostatic:
+        raise InputError(f"-{p}{first}: a material with memory starts from the initial effective stress; set "
+                         "-pfault_geostatic true")
+    compression, recompression = reader.get(p + first), reader.get(p + second)
+    e0 = reader.get(p + "void_ratio") if form == "index" else None
+    _check_soil_numbers(p, form, compression, recompression, e0)
+    return Soil(name, form, compression, recompression, e0, *_read_preconsolidation(reader, p, name, precon))
+
+
+def _check_soil_numbers(p: str, form: str, compression: float | FieldRef, recompression: float | FieldRef,
+                        e0: float | FieldRef | None) -> None:
+    """Ranges of the numbers (a field's values are checked when its file is read: pfault.materials.properties.RANGES)."""
+    first, second = SOIL_FORMS[form]
+    for key, v in ((first, compression), (second, recompression), ("void_ratio", e0)):
+        if v is not None and not is_field(v) and not v > 0:
+            raise InputError(f"-{p}{key}: must be positive, got {v:g}")
+    if not is_field(compression) and not is_field(recompression) and not recompression < compression:
+        words = ("the recompression (swelling) index is the smaller, typically Cc/10 to Cc/5" if form == "index" else
+                 "the elastic skeletal storage is the smaller, typically Sskv/50 to Sskv/10")
+        raise InputError(f"-{p}{second}: {recompression:g} is not below -{p}{first} {compression:g}; {words}")
+
+
+def _read_preconsolidation(reader: OptionReader, p: str, name: str,
+                           kinds: list[str]) -> tuple[str, float | FieldRef | None]:
+    if not kinds:
+        return "normal", None
+    if len(kinds) > 1:
+        raise InputError(f"-{p}{PRECONSOLIDATION[kinds[0]]} and -{p}{PRECONSOLIDATION[kinds[1]]}: give one "
+                         f"preconsolidation for '{name}'")
+    kind = kinds[0]
+    key = PRECONSOLIDATION[kind]
+    v = reader.get(p + key)
+    if is_field(v):
+        return kind, v
+    if kind == "stress" and not v > 0:
+        raise InputError(f"-{p}{key}: must be positive, got {v:g} (a vertical effective stress, e.g. 300*kPa)")
+    if kind == "ratio" and not v >= 1:
+        raise InputError(f"-{p}{key}: {v:g} is below 1, a preconsolidation below the current stress; give 1 "
+                         "(normally consolidated) or more")
+    if kind == "head" and not v <= 0:
+        raise InputError(f"-{p}{key}: {v:g} m lies above the initial heads, a preconsolidation below the current "
+                         "stress; give 0 (normally consolidated) or the lowest head before as a negative value, "
+                         "e.g. -5*m")
+    return kind, v
+
+
+def soil_cell_message(soil: Soil, compression: np.ndarray, recompression: np.ndarray,
+                      below_initial: np.ndarray) -> str | None:
+    """The first problem of a material with memory on its cells, once its fields are interpolated and its initial
+    stress is known (None if none): a recompression index (or elastic storage) not below the compression one, or cells
+    whose preconsolidation lies below their initial vertical effective stress (``below_initial``,
+    pfault.physics.soil.below_initial). Numbers were checked when read; this catches fields and depth profiles."""
+    p = f"pfault_material_{soil.name}_"
+    first, second = SOIL_FORMS[soil.form]
+    bad = ~(np.asarray(recompression) < np.asarray(compression))
+    if np.any(bad):
+        return (f"-{p}{second}: not below -{p}{first} in {int(bad.sum())} of {bad.size} cells of '{soil.name}'; fix "
+                "the values or the fields (the recompression is the smaller)")
+    n = int(np.count_nonzero(below_initial))
+    if n == 0:
+        return None
+    if soil.preconsolidation == "normal":
+        return (f"-{p}{first}: {n} of {len(below_initial)} cells of '{soil.name}' have no initial compression (no "
+                "effective stress at the start); check -pfault_geostatic and the water table")
+    key = PRECONSOLIDATION[soil.preconsolidation]
+    return (f"-{p}{key}: {n} of {len(below_initial)} cells of '{soil.name}' start above their preconsolidation (a "
+            "preconsolidation below the current stress); raise it, give a depth profile (field:FILE), or give "
+            f"-{p}overconsolidation_ratio or -{p}preconsolidation_head, which follow the initial stress")
 
 
 def read_drawdown(reader: OptionReader, names: Iterable[str], water_density: float,

@@ -4,7 +4,7 @@ record; surface.h5 writes the same fields (pfault.io.steps)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -16,23 +16,32 @@ from .mesh.fault import copy_index, output_mesh
 
 @dataclass(frozen=True)
 class SurfaceStep:
-    """The land surface at an output step (rank 0): its vertices' displacement and its hazard fields."""
+    """The land surface at an output step (rank 0): its vertices' displacement, its hazard fields (per triangle)
+    and the terms' fields per vertex (``points``: a soil's inelastic and elastic subsidence, critical heads)."""
     displacement: np.ndarray
     fields: dict
+    points: dict = field(default_factory=dict)
 
 
 class LandSurface:
     """The land surface of ``model`` (the triangles of -pfault_ground_surface on the output mesh, or those at its
-    top: pfault.hazard.land_surface; ``surface`` on rank 0, None when there is none) and the output-mesh rows of
-    this rank's owned vertices and pieces on it. Collective."""
+    top: pfault.hazard.land_surface; ``surface`` on rank 0, None when there is none), the output-mesh rows of
+    this rank's owned vertices and pieces on it, and what the equations' terms measure along the vertical columns
+    under its vertices (``columns``: (term index, the term's columns), pfault.solver.terms). Collective."""
 
     def __init__(self, model: Any) -> None:
         self.comm, self.mpi = model.comm, model.comm.tompi4py()
         self.surface = run_on_root(self.comm, _land_surface, model)
         vertices = self.mpi.bcast(None if self.surface is None else self.surface.vertices, root=0)
         self.vertices = vertices
+        self.columns: list = []
         if vertices is None:
             return
+        xy = self.mpi.bcast(None if self.surface is None else self.surface.points[:, :2], root=0)
+        for k, term in enumerate(model.equations.terms):
+            columns = term.columns(xy, model.mesh)
+            if columns is not None:
+                self.columns.append((k, columns))
         mesh, dofmap = model.mesh, model.dofmap
         sides = self.mpi.bcast(model.split.vert_sides if self.comm.rank == 0 and model.split is not None
                                else np.ones(mesh.n_global_vertices, np.int64) if self.comm.rank == 0 else None)
@@ -46,17 +55,26 @@ class LandSurface:
         on = np.isin(rows, vertices)
         self.rows, self.take = rows[on], take[on]
 
-    def measure(self, both: np.ndarray) -> tuple[dict, SurfaceStep | None]:
+    def measure(self, both: np.ndarray, terms: tuple = ()) -> tuple[dict, SurfaceStep | None]:
         """The hazard maxima of the displacement ``both`` (local vertices x 3 per side, relative to the initial
-        state) on every rank, and the surface's step on rank 0 (None elsewhere and without a land surface).
-        Collective."""
+        state) and the terms' figures on every rank, and the surface's step on rank 0 (None elsewhere and without a
+        land surface). ``terms``: the state's local array, the terms' loads and histories, for the terms'
+        columns. Collective."""
         if self.vertices is None:
             return {}, None
         u = both.reshape(len(both), both.shape[1] // 3, 3)[self.take[:, 0], self.take[:, 1]]
         parts = self.mpi.gather((self.rows, u), root=0)
         res = run_on_root(self.comm, self._step, parts)
         hz = self.mpi.bcast(res[0] if res is not None else None, root=0)
-        return hz, (res[1] if res is not None else None)
+        step = res[1] if res is not None else None
+        for k, columns in self.columns:
+            x_loc, loads, histories = terms
+            figures, points = columns.surface(x_loc, loads[k], histories[k],
+                                              None if step is None else step.displacement)
+            hz.update(figures)
+            if step is not None:
+                step = replace(step, points={**step.points, **points})
+        return hz, step
 
     def _step(self, parts: list) -> tuple[dict, SurfaceStep]:
         surf = self.surface

@@ -434,7 +434,7 @@ def cases():
     out.append(Case("cycle_two_blocks", "pressed, pulled open, pressed shut, reopened (c = 0)", TWO_BLOCKS,
                     cycle_opening(), CYCLE))
     out.append(Case("cycle_wuxi_f3", "Wuxi (size factor 3): 10 yr drawdown, 10 yr recovery, 10 yr drawdown",
-                    "config/wuxi_recovery.opts", reopening(10, 20, 30), WUXI_CYCLE))
+                    "config/wuxi_recovery_elastic.opts", reopening(10, 20, 30), WUXI_CYCLE))
     out.append(Case("faults_to_fixed_bottom", "two faults through the whole depth: reach the fixed bottom, the "
                     "rollers and the land surface", TWO_FAULTS, xy_symmetry(), FAULTS_DEEP, quick=True,
                     quick_options=QUICK_STEPS))

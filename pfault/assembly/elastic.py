@@ -20,10 +20,14 @@ CHUNK = 4096     # cells per kernel batch: element matrices of a batch stay in c
 
 
 class ElasticAssembler:
-    def __init__(self, mesh: LocalMesh, dofmap: DofMap, props: CellProperties) -> None:
-        """``props``: the material properties of the local cells."""
+    def __init__(self, mesh: LocalMesh, dofmap: DofMap, props: CellProperties,
+                 stiffness: np.ndarray | None = None) -> None:
+        """``props``: the material properties of the local cells; ``stiffness``: the cells whose stiffness the
+        operator holds (None: all); the others (the materials with memory, pfault.soils) enter it with zero
+        stiffness, which keeps their pattern: their term adds their stiffness."""
         self.mesh = mesh
         self.dofmap = dofmap
+        self.stiffness = stiffness
         self.lam, self.mu = el.lame(props.young_modulus, props.poisson_ratio)
         self.alpha = props.biot_coefficient
         self.density = props.density
@@ -40,9 +44,12 @@ class ElasticAssembler:
         dofs = self.dofmap.cell_dofs
         idx = (dofs[:, 0::3] // 3 if blocked else dofs).astype(PETSc.IntType)
         insert = mat.setValuesBlockedLocalRCV if blocked else mat.setValuesLocalRCV
+        lam, mu = self.lam, self.mu
+        if self.stiffness is not None:
+            lam, mu = np.where(self.stiffness, lam, 0.0), np.where(self.stiffness, mu, 0.0)
         for s in range(0, len(dofs), CHUNK):
             e = slice(s, s + CHUNK)
-            ke = el.stiffness(self.grad[e], self.vol[e], self.lam[e], self.mu[e])
+            ke = el.stiffness(self.grad[e], self.vol[e], lam[e], mu[e])
             insert(idx[e], idx[e], ke.reshape(len(ke), 144), addv=PETSc.InsertMode.ADD_VALUES)
 
     # -- loads (local arrays, to be added with localToGlobal) ---------------------------------

@@ -22,6 +22,7 @@ import numpy as np
 from mpi4py import MPI
 
 from ..effects import logged
+from ..solver.terms import TermDefaults
 from . import blocks
 from . import breaking as br
 from . import contact as ct
@@ -29,7 +30,7 @@ from . import margins as fm
 from .bubbles import CellBubbles
 from .faces import FaultFaces
 from .history import FacePressure, FaultHistory, FaultLoad, StepStart
-from .measures import FaultMeasures, broken_figures, face_fields, fault_figures, fault_summary
+from .measures import FaultMeasures, broken_figures, face_fields, fault_figures, fault_summary, state_counts
 
 REPORT_TOLERANCE = 1e-9     # a face within this share of E (Pa) of a switch is reported closed and stuck
 
@@ -80,7 +81,7 @@ def face_laws(faces: FaultFaces, settings: list, face_young: np.ndarray) -> Face
                     br.face_strength(settings, faces.fault))
 
 
-class FaultTerm:
+class FaultTerm(TermDefaults):
     """The contact laws of all faults on the faces this rank owns (``faces``), with the condensed face bubbles
     of their cells (``bubbles``) and the pore pressure their laws see (``pressure``). Pure in the history: every
     method takes the faces' history and load and returns values or the next history. ``settings``: the faults'
@@ -233,6 +234,10 @@ class FaultTerm:
             p = penalty[pen]
             dt[pen] -= dg[pen] / np.stack([p.c_n, p.c_t, p.c_t], axis=1)[:, None, :]
         return st, r, dg, dt
+
+    def counts(self, state: np.ndarray) -> dict:
+        """The faces stuck, slipping and open in ``state`` on all ranks (collective)."""
+        return state_counts(self.faces.mpi, np.asarray(state, np.int64))
 
     def jacobian_varies(self, state: np.ndarray) -> bool:
         """Whether the Jacobian depends on the iterate beyond the faces' states (slipping faces), on all ranks.

@@ -38,6 +38,11 @@ Contents (datasets; attributes on the root)
   ``faults/break_time`` (serial fault faces, s, NaN while intact): which faces of candidate surfaces have broken
   and when (pfault.faults.breaking; every face of a pre-existing fault is broken, without a time): the fault
   term's history (pfault.faults.term.FaultTerm.history_arrays)
+- ``soils/stress0``, ``soils/stress``, ``soils/plastic_strain``, ``soils/strain`` (serial cells x 9) and
+  ``soils/preconsolidation``, ``soils/branch`` (serial cells; zero outside the materials with memory): the memory
+  of the materials with memory (pfault.soils.history.SoilMemory.arrays): the initial effective stress, the law's
+  effective stress, plastic strain and preconsolidation p'_c at the checkpoint's state, the P1 strain of that state
+  and the branch of each cell's last step
 - ``flow/head`` (serial vertices, m), ``flow/history`` (its step records, JSON as bytes), attribute
   ``flow_time``
 - ``steps``: the run's step records up to the checkpoint's step (JSON as bytes), those of summary.json: a run

@@ -15,6 +15,7 @@ from mpi4py import MPI
 
 from ..errors import InputError, run_on_root
 from ..paths import beside_scene
+from ..soils.stations import soil_station_observers
 from .insar import InsarSeries, InsarSettings, read_insar_settings
 from .insar import check_continuation as insar_continue
 from .insar_grid import locate_product_pixels
@@ -89,6 +90,7 @@ class Observations:
         out: list = []
         if self.stations is not None:
             out.append(StationObserver(output, *self.stations))
+            out += soil_station_observers(output, self.stations[0], output.model.scene.mesh_origin)
         if self.pixels is not None and self.settings.insar.grid:      # (raster, LOS, CRS) of the product's pixels
             found, located = self.pixels
             raster, los, crs = found if found is not None else (None, None, None)

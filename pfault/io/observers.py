@@ -39,8 +39,12 @@ def progress_line(step: int, rec: dict, candidates: tuple = ()) -> str:
         if rec.get("breaking_passes"):
             n = rec["breaking_passes"]
             extra += f" (+{rec['faces_broken_step']} in {n} pass{'es' if n > 1 else ''})"
+    if "cells_virgin" in rec:
+        extra += f"  virgin/elastic cells {rec['cells_virgin']}/{rec['cells_elastic']}"
     if "max_subsidence_m" in rec:
         extra += f"  subsidence {rec['max_subsidence_m']:.4g} m"
+        if "subsidence_inelastic_at_max_m" in rec:
+            extra += f" (inelastic {rec['subsidence_inelastic_at_max_m']:.4g} m)"
     if "max_fault_opening_m" in rec:
         extra += f"  opening {rec['max_fault_opening_m']:.3g} m  slip {rec['max_fault_slip_m']:.3g} m"
     if rec.get("substeps", 1) > 1:
@@ -108,8 +112,9 @@ class RunOutput:
         zeros = np.zeros(m.dofmap.n_local)
         eq = m.equations
         rest = tuple(term.at_rest(load) for term, load in zip(eq.terms, eq.loads.term_loads))
-        values = self.step_values(zeros, eq.local_array(state.u_ref), np.zeros(len(m.mesh.cells)), rest, margins)
-        self.initial = (values, self.surface.measure(per_side(m, zeros))[1])
+        x_ref = eq.local_array(state.u_ref)
+        values = self.step_values(zeros, x_ref, np.zeros(len(m.mesh.cells)), rest, margins)
+        self.initial = (values, self.surface.measure(per_side(m, zeros), (x_ref, rest, state.histories))[1])
 
     def open(self) -> None:
         """Stage the output directory and write the initial state, or on a restart the output steps of the run

@@ -129,7 +129,8 @@ class StepOutput:
     def _surface_step(self, step, t, surface):
         """Land-surface fields of one output step (rank 0): displacement and the earth-fissure hazard fields."""
         if surface is not None:
-            self.writer.write_surface_step(step, t, {"displacement": surface.displacement}, surface.fields)
+            self.writer.write_surface_step(step, t, {"displacement": surface.displacement, **surface.points},
+                                           surface.fields)
 
     def close(self) -> None:
         for series in self.series.values():

@@ -42,6 +42,14 @@ RANGES = {
     "poisson_ratio": (lambda v: (v > -1.0) & (v < 0.5), "in (-1, 0.5)"),
     "biot_coefficient": (lambda v: (v >= 0.0) & (v <= 1.0), "in [0, 1]"),
     "density": (lambda v: v > 0, "positive"),
+    # materials with memory; the storages before specific_storage, whose suffix they share
+    "recompression_index": (lambda v: v > 0, "positive"),
+    "compression_index": (lambda v: v > 0, "positive"),
+    "inelastic_skeletal_specific_storage": (lambda v: v > 0, "positive"),
+    "elastic_skeletal_specific_storage": (lambda v: v > 0, "positive"),
+    "preconsolidation_stress": (lambda v: v > 0, "positive"),
+    "overconsolidation_ratio": (lambda v: v >= 1, "at least 1"),
+    "preconsolidation_head": (lambda v: v <= 0, "zero or negative (m below the initial heads)"),
     "hydraulic_conductivity": (lambda v: v > 0, "positive"),
     "specific_storage": (lambda v: v > 0, "positive"),
     "void_ratio": (lambda v: v > 0, "positive"),
@@ -157,13 +165,18 @@ def read_fields(refs: Sequence[FieldRef], scene_file: str, notes: list | None = 
 
 
 # -- per-cell arrays --------------------------------------------------------------------------------------
-def field_refs(materials: Sequence[Any], flow: Any = None) -> list[FieldRef]:
+SOIL = ("compression", "recompression", "void_ratio", "preconsolidation_value")   # pfault.scene.Soil's numbers
+
+
+def field_refs(materials: Sequence[Any], flow: Any = None, soils: Sequence[Any] = ()) -> list[FieldRef]:
     """The field options of the materials' mechanical properties and, with ``flow`` (the flow model's settings,
-    pfault.solver.flow.FlowSettings), of their flow properties."""
+    pfault.solver.flow.FlowSettings), of their flow properties, and of the laws with memory ``soils`` (one
+    pfault.scene.Soil or None per material)."""
     refs = [getattr(m, p) for m in materials for p in MECHANICAL if is_field(getattr(m, p))]
     if flow is not None:
         refs += [v for seq in (flow.conductivity, flow.storage, flow.void_ratio) for v in seq if is_field(v)]
-    return refs
+    refs += [getattr(s, p) for s in soils if s is not None for p in SOIL if is_field(getattr(s, p))]
+    return list({ref.option: ref for ref in refs}.values())      # a void ratio of both the flow and the law once
 
 
 def serial_field_values(names: Sequence[str], refs: Sequence[FieldRef], points: np.ndarray, tets: np.ndarray,

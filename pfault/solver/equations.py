@@ -157,6 +157,16 @@ class Equations:
     def trial_configuration(self, histories: tuple) -> tuple:
         return tuple(term.trial_configuration(h) for term, h in zip(self.terms, histories))
 
+    def counts(self, x: Any, histories: tuple, loads: tuple | None = None) -> dict:
+        """Each term's counts of its configuration at x, as reported (a fault's faces stuck/slipping/open, a soil's
+        cells compacting on the virgin line), merged; ``loads``: the terms' loads, by default those last set.
+        Collective."""
+        x_loc = self.local_array(x)
+        out: dict = {}
+        for term, load, h in zip(self.terms, self.loads.term_loads if loads is None else loads, histories):
+            out.update(term.counts(term.configuration(x_loc, load, h, exact=False)))
+        return out
+
     # -- the initial gravity state -------------------------------------------------------------
     def initial_operator(self) -> Any:
         """The operator of the elastic gravity solve: K, with the terms' blocks of the initial state (every fault
@@ -173,11 +183,15 @@ class Equations:
         return A
 
     def effective_stress(self, u_local: np.ndarray, histories: tuple, loads: tuple | None = None) -> np.ndarray:
-        """Incremental effective stress C:eps per cell (nc, 3, 3), its mean over the cell: of the P1 displacements
-        of ``u_local`` and of the strain the terms add (a fault's face bubbles in the cells beside it, recovered
-        from u_local's multipliers under the terms' ``loads``, by default those last set)."""
+        """Incremental effective stress per cell (nc, 3, 3), its mean over the cell: C:eps of the P1 displacements
+        of ``u_local``, or the law's in the cells a term gives their stress (a material with memory), and of the
+        strain the terms add (a fault's face bubbles in the cells beside it, recovered from u_local's multipliers)
+        under the terms' ``loads``, by default those last set."""
         sig = self.asm.effective_stress(u_local)
         loads = self.loads.term_loads if loads is None else loads
+        for term, load, h in zip(self.terms, loads, histories):
+            cells, stress = term.cell_stress(u_local, load, h)
+            sig[cells] = stress
         for term, load, h in zip(self.terms, loads, histories):
             cells, eps = term.cell_strain(u_local, load, h)
             sig[cells] += el.stress(eps, self.asm.lam[cells], self.asm.mu[cells])

@@ -106,7 +106,9 @@ def read_flow_settings(reader: OptionReader, material_names: Sequence[str], mate
             raise InputError(f"-{p}void_ratio: must be positive, got {e}")
         ss = reader.get(p + "specific_storage")
         skeleton = (m.young_modulus, m.poisson_ratio, e, m.biot_coefficient)
-        if ss is None and not any(is_field(v) for v in skeleton):
+        # (a material with memory has no drained modulus: its default storage is its cells' elastic skeletal
+        # storage at their reference modulus, pfault.materials.properties.flow_cell_properties)
+        if ss is None and m.young_modulus is not None and not any(is_field(v) for v in skeleton):
             ss = float(fl.specific_storage(m.young_modulus, m.poisson_ratio, e, m.biot_coefficient,
                                            water_density, gravity))
         elif ss is not None and not is_field(ss) and not ss > 0:

@@ -34,7 +34,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ..effects import event_total
-from ..records import Solve, SolveCost
+from ..records import Solve, SolveCost, counts_text
 from ..petsc_compat import set_lag_preconditioner
 from .fieldsplit import FieldSplit
 from .setup import apply_solver_defaults, is_direct
@@ -168,7 +168,8 @@ class StepSolver:
         nonlinear = not equations.linear
         if nonlinear:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
-        apply_solver_defaults(linear=equations.linear)
+        apply_solver_defaults(linear=equations.linear,
+                              full_steps=all(term.full_newton_steps for term in equations.terms))
         opts = PETSc.Options()
         self._atol_user, self._ksp_atol_user = opts.hasName("snes_atol"), opts.hasName("ksp_atol")
         self.snes = snes = PETSc.SNES().create(comm=self.comm)
@@ -207,15 +208,16 @@ class StepSolver:
 
     def _print_states(self, snes: Any, its: int, fnorm: float) -> None:
         """-pfault_contact_monitor: the terms' configurations at each Newton iterate (a fault's faces stuck,
-        slipping and open) and how many changed."""
-        st = np.concatenate(self.eq.configuration(snes.getSolution(), self.state.histories, exact=False))
-        mpi = self.comm.tompi4py()
-        c = mpi.allreduce(np.bincount(st, minlength=3), op=MPI.SUM)
+        slipping and open, a soil's cells compacting on the virgin line) and how many changed."""
+        x = snes.getSolution()
+        st = np.concatenate(self.eq.configuration(x, self.state.histories, exact=False))
         prev = self._monitor_state if its > 0 else st
-        changed = mpi.allreduce(int(np.count_nonzero(prev != st)), op=MPI.SUM)
+        changed = self.comm.tompi4py().allreduce(int(np.count_nonzero(prev != st)), op=MPI.SUM)
         self._monitor_state = st
-        PETSc.Sys.Print(f"  newton {its:2d}  |F| {fnorm:.3e}  stick/slip/open {c[0]}/{c[1]}/{c[2]}"
-                        + (f"  ({changed} faces changed state)" if its else ""))
+        counts = self.eq.counts(x, self.state.histories)
+        what = " and ".join(w for k, w in (("stick", "faces"), ("cells_virgin", "cells")) if k in counts)
+        PETSc.Sys.Print(f"  newton {its:2d}  |F| {fnorm:.3e}  {counts_text(counts)}"
+                        + (f"  ({changed} {what} changed state)" if its else ""))
 
     # -- linear solves ---------------------------------------------------------------------------------
     def solve_linear(self, A: Any, b: Any, x: Any) -> int:
@@ -226,13 +228,13 @@ class StepSolver:
         ksp.solve(b, x)
         return int(ksp.getConvergedReason())
 
-    def solve_response(self, rhs: Any, du: Any) -> tuple[bool, SolveCost]:
-        """Solve J du = rhs with the Jacobian of the converged state in its configuration (every term keeps its
-        state: a fault's faces stuck, slipping or open) on the step's KSP: the direct solver's factors are kept
+    def solve_response(self, rhs: Any, du: Any, config: tuple | None = None) -> tuple[bool, SolveCost]:
+        """Solve J du = rhs with the Jacobian of the converged state in the terms' configuration ``config`` (None:
+        the state's; a fault's faces stuck, slipping or open) on the step's KSP: the direct solver's factors are kept
         when they are of that Jacobian or the factor reuse keeps them, refactored otherwise. The Krylov solve stops
         at -ksp_rtol of |rhs| (the step's absolute tolerance is for its forces). Returns (converged, its cost)."""
         eq, t0, nfact, njac = self.eq, time.perf_counter(), factorizations(), self.eq.n_jacobians
-        self._jacobian(self.snes, self.state.u, eq.J, eq.J)
+        self._jacobian(self.snes, self.state.u, eq.J, eq.J, config or None)
         ksp = self.snes.getKSP()
         ksp.setOperators(eq.J, eq.J)
         rtol, atol, divtol, max_it = ksp.getTolerances()
@@ -290,11 +292,8 @@ class StepSolver:
         cost = replace(c, newton_its=newton, ksp_its=krylov, factorizations=int(factorizations() - nfact),
                        jacobians=int(self.eq.n_jacobians - njac), residual_history=history)
         pivots = self.reuse.step_null_pivots if self.reuse is not None else 0
-        config = np.concatenate(self.eq.configuration(self.state.u, self.state.histories, exact=False))
-        counts = self.comm.tompi4py().allreduce(np.bincount(config, minlength=3), op=MPI.SUM)
         return replace(out, cost=cost, nonlinear=True, predictor=predictor, atol=float(snes.getTolerances()[1]),
-                       null_pivots=int(pivots), counts={"stick": int(counts[0]), "slip": int(counts[1]),
-                                                         "open": int(counts[2])})
+                       null_pivots=int(pivots), counts=self.eq.counts(self.state.u, self.state.histories))
 
     def predict(self, t: float) -> tuple | None:
         """Move state.u to the step's predictor and return None, or do the elastic trial and return what it

@@ -5,7 +5,10 @@ With the pore-pressure change dp + lam dp_rate (``cell_rate``: Pa per metre of d
 equations F(x, lam) = K u - f(lam) + sum of the terms' residuals are affine in the load for fixed configurations;
 the rate dx/dlam of a converged state x solves
 
-    J dx/dlam = df/dlam - sum over the terms of d(residual)/dlam         (J: dF/dx at x, its configuration kept)
+    J dx/dlam = df/dlam - sum over the terms of d(residual)/dlam
+
+(J: dF/dx at x in the branches the drawdown takes, the terms' ``margin_configuration``: a fault's faces keep their
+states, a material with memory's cells on their cap compact on the virgin line).
 
 df/dlam is the Biot load of the rate (and the terms' share: a fault's condensed bubble load), each term's residual
 changes with its load (a fault's face pore pressure in its effective tractions, its bubbles' load in its jumps).
@@ -51,12 +54,17 @@ def drawdown_rhs(eq: Any, x_loc: np.ndarray, histories: tuple, t: float, cell_ra
 def drawdown_response(eq: Any, solver: Any, state: Any, t: float, cell_rate: np.ndarray, solve: bool = True
                       ) -> Response:
     """The response of the converged state (``state``, at time t) to the pore-pressure rate ``cell_rate``: one
-    linear solve with the step solver (pfault.solver.policy.StepSolver.solve_response); ``solve`` False: the load
-    rates only, the state's rate zero (no part's margin depends on it). Collective."""
-    rhs, rates = drawdown_rhs(eq, eq.local_array(state.u), state.histories, t, cell_rate)
+    linear solve with the step solver (pfault.solver.policy.StepSolver.solve_response), its Jacobian in the
+    configuration a further drawdown takes (the terms' ``margin_configuration``: a soil's cells on their cap on the
+    virgin line); ``solve`` False: the load rates only, the state's rate zero (no part's margin depends on it).
+    Collective."""
+    x_loc = eq.local_array(state.u)
+    rhs, rates = drawdown_rhs(eq, x_loc, state.histories, t, cell_rate)
     du = rhs.duplicate()
     try:
-        converged, cost = solver.solve_response(rhs, du) if solve else (True, SolveCost())
+        config = tuple(term.margin_configuration(x_loc, load, h)
+                       for term, load, h in zip(eq.terms, eq.loads.term_loads, state.histories)) if solve else ()
+        converged, cost = solver.solve_response(rhs, du, config) if solve else (True, SolveCost())
         dx = eq.local_array(du) if converged and solve else np.full(eq.dofmap.n_local, 0.0 if converged else np.nan)
     finally:
         du.destroy()

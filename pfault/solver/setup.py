@@ -90,7 +90,10 @@ def is_direct() -> bool:
     return PETSc.Options().getString("pc_type", "") in ("lu", "cholesky")
 
 
-def apply_solver_defaults(linear: bool = False) -> None:
+LINE_SEARCH = "bt"      # Newton's line search where a term's law needs one (SoilTerm.full_newton_steps)
+
+
+def apply_solver_defaults(linear: bool = False, full_steps: bool = True) -> None:
     """Code defaults, each only where the user is silent. A linear scene (no fault) needs one linear solve per
     step: SNES type ksponly. A fault scene runs Newton (newtonls) on the semismooth residual with full steps, its
     step-size test off (-snes_stol 0: the unknowns mix metres and pascals, so a relative step size means nothing),
@@ -111,7 +114,7 @@ def apply_solver_defaults(linear: bool = False) -> None:
         # the same c: their iterations do not depend on k and are the Lagrange faces' (k = 1e2, 1e4, 1e6 E/h:
         # 8 with full steps, 11 backtracking; studies/penalty_linesearch.py). Backtracking was their default
         # while their traction was the return map of the jump with k itself (full steps 2-cycled there).
-        set_default("snes_linesearch_type", "basic")
+        set_default("snes_linesearch_type", "basic" if full_steps else LINE_SEARCH)
     if not opts.hasName("pc_type"):
         set_default("pc_type", "lu")
         set_default("pc_factor_mat_solver_type", "mumps")

@@ -110,7 +110,9 @@ def test_included_file_is_found_beside_the_including_file(tmp_path):
     assert summary["scene"] == "oedometer"
 
 
-@pytest.mark.parametrize("variant, base_scene, own_scene", [("wuxi_recovery.opts", "wuxi", "wuxi_recovery"),
+@pytest.mark.parametrize("variant, base_scene, own_scene", [("wuxi_recovery.opts", "wuxi_inelastic", "wuxi_recovery"),
+                                                             ("wuxi_recovery_elastic.opts", "wuxi",
+                                                              "wuxi_recovery_elastic"),
                                                              ("wuxi_fissure.opts", "wuxi", "wuxi_fissure"),
                                                              ("queretaro_calibrated.opts", "queretaro",
                                                               "queretaro_calibrated")])

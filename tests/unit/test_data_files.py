@@ -130,5 +130,5 @@ def test_a_crs_file_is_a_data_file(tmp_path):
     assert by_file.crs.to_epsg() == 32650 and by_file.crs_file == str(tmp_path / "site.prj")
     assert read_georef(Reader("EPSG:32650"), scene_file).crs_file == ""
     scene = SimpleNamespace(settings=SimpleNamespace(mesh_file=""), heads_settings=None, materials={},
-                            flow_settings=None, georef=by_file)
+                            flow_settings=None, soils=(), georef=by_file)
     assert provenance.scene_files(scene, "", scene_file) == [("pfault_crs", str(tmp_path / "site.prj"))]

@@ -1,0 +1,122 @@
+"""Soils that remember on 1 and 2 ranks, alone and with a fault: the same answer on both (1e-10), and a restart across
+the loading/unloading switch equal to the uninterrupted run.
+
+config/soil_column.opts (5 stages: loading past the preconsolidation, further, unloading, reloading past the earlier
+maximum, unloading): 1 against 2 ranks; stopped after the unloading (step 3, every cell back on its swelling line)
+and continued through the reloading past the earlier maximum (every cell back on the virgin line), on 1 and 2 ranks.
+A faulted box with soils (the equations' two terms: the fault's faces and the soils' cells; the block beyond the
+fault pulled away by a prescribed displacement, so that faces slip and open while cells compact on the virgin line,
+and open again while the heads recover and every cell swells): 1 against 2 ranks, and its restart across the
+recovery.
+"""
+
+import pytest
+
+from conftest import compare_runs, run_scene
+
+COLUMN = "config/soil_column.opts"
+FAULTED = """# a box with a fault and soils that remember: the equations' two terms
+-pfault_scene faulted_soils
+-pfault_mesh_generator box
+-pfault_box_size 400,100,100
+-pfault_box_cells 16,4,10
+-pfault_box_materials clay,sand,rock
+-pfault_box_interfaces 20,60
+-pfault_box_fault_planes fissure:x:375:0:100:-50:0
+-pfault_material_clay_compression_index 0.25
+-pfault_material_clay_recompression_index 0.04
+-pfault_material_clay_void_ratio 0.9
+-pfault_material_clay_poisson_ratio 0.3
+-pfault_material_clay_density 1900
+-pfault_material_sand_compression_index 0.05
+-pfault_material_sand_recompression_index 0.01
+-pfault_material_sand_void_ratio 0.7
+-pfault_material_sand_poisson_ratio 0.3
+-pfault_material_sand_density 2000
+-pfault_material_rock_young_modulus 1200*MPa
+-pfault_material_rock_poisson_ratio 0.3
+-pfault_material_rock_density 2400
+-pfault_faults fissure
+-pfault_fault_fissure_friction_angle 30
+-pfault_bc_bottom_type fixed
+-pfault_bc_xmax_type displacement
+-pfault_bc_xmax_components x
+-pfault_bc_xmax_displacement 0.3,0,0
+-pfault_bc_xmax_history 0:0,4*year:1
+-pfault_bc_xmin_type roller
+-pfault_bc_ymin_type roller
+-pfault_bc_ymax_type roller
+-pfault_geostatic true
+-pfault_material_sand_head_drawdown 0:0,2*year:20,4*year:5
+-pfault_material_clay_head_drawdown 0:0,2*year:10,4*year:2
+-pfault_time_end 4*year
+-pfault_time_steps 4
+-pfault_solver mumps
+"""
+EXACT = ["-ksp_atol", "0", "-ksp_rtol", "1e-12"]        # Krylov solves to round-off: runs agree to it
+
+
+@pytest.fixture(scope="module")
+def faulted(tmp_path_factory):
+    path = tmp_path_factory.mktemp("faulted") / "faulted_soils.opts"
+    path.write_text(FAULTED)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def column_runs(tmp_path_factory):
+    base = tmp_path_factory.mktemp("column")
+    return {ranks: (base / f"r{ranks}", run_scene(COLUMN, base / f"r{ranks}", ranks=ranks, extra=EXACT)[1])
+            for ranks in (1, 2)}
+
+
+def test_column_on_one_and_two_ranks(column_runs):
+    (one, s1), (two, s2) = column_runs[1], column_runs[2]
+    assert s1["converged"] and s2["converged"] and s2["ranks"] == 2
+    virgin = [r["cells_virgin"] for r in s1["steps"] if not r.get("initial")]
+    assert virgin[1] == virgin[3] == 234 and virgin[2] == virgin[4] == 0      # loading, unloading, reloading
+    compare_runs(one, two, 1e-10)
+
+
+@pytest.mark.parametrize("ranks", [1, 2])
+def test_restart_across_the_switch(column_runs, tmp_path, ranks):
+    ref, _ = column_runs[ranks]
+    part = tmp_path / "part"
+    run_scene(COLUMN, part, ranks=ranks, extra=[*EXACT, "-pfault_time_end", "3*year", "-pfault_time_steps", "3"])
+    _, s = run_scene(COLUMN, part, ranks=ranks, extra=[*EXACT, "-pfault_restart", str(part)])
+    assert s["completed_steps"] == [1, 2, 3, 4, 5] and s["restart"]["step"] == 3
+    compare_runs(ref, part, 1e-12 if ranks == 1 else 1e-10)
+
+
+def test_faults_and_soils_together(faulted, tmp_path):
+    """Both terms in one run: the faces' counts and the cells' in every step's record, on 1 and 2 ranks alike
+    (1e-10), and a restart after the first recovery step equal to the uninterrupted run."""
+    runs = {r: run_scene(faulted, tmp_path / f"r{r}", ranks=r, extra=EXACT)[1] for r in (1, 2)}
+    steps = [r for r in runs[1]["steps"] if not r.get("initial")]
+    assert all({"stick", "slip", "open", "cells_virgin", "cells_elastic"} <= set(r) for r in steps)
+    assert steps[1]["cells_virgin"] > 0 and steps[1]["open"] > 0 and steps[1]["slip"] > 0
+    assert steps[2]["cells_virgin"] == 0 and steps[3]["open"] > 0  # the heads recover: every cell swells
+    assert runs[1]["soils"]["clay"]["max_compaction_inelastic"] > 0 and "faults" in runs[1]
+    compare_runs(tmp_path / "r1", tmp_path / "r2", 1e-10)
+    part = tmp_path / "part"
+    run_scene(faulted, part, ranks=2, extra=[*EXACT, "-pfault_time_end", "3*year", "-pfault_time_steps", "3"])
+    _, s = run_scene(faulted, part, ranks=2, extra=[*EXACT, "-pfault_restart", str(part)])
+    assert s["completed_steps"] == [1, 2, 3, 4]
+    compare_runs(tmp_path / "r2", part, 1e-10)
+
+
+def test_flow_model_with_soils(tmp_path):
+    """The flow model with a material with memory (the flow box's soil given indices, no drained modulus): its default
+    specific storage is its cells' elastic skeletal storage at their reference modulus (it was NaN before: the flow's
+    solve diverged), and the drawdown compacts it on the virgin line."""
+    from conftest import FLOW_BOX
+    scene = FLOW_BOX.replace("-pfault_material_soil_young_modulus 10*MPa",
+                             "-pfault_material_soil_compression_index 0.2\n-pfault_material_soil_recompression_index "
+                             "0.03\n-pfault_material_soil_void_ratio 0.8\n-pfault_material_soil_density 2000\n"
+                             "-pfault_geostatic true")
+    path = tmp_path / "flow_soil.opts"
+    path.write_text(scene + "-pfault_time_end 2*day\n-pfault_time_steps 2\n")
+    _, s = run_scene(str(path), tmp_path / "out")
+    steps = [r for r in s["steps"] if not r.get("initial")]
+    assert s["converged"] and steps[-1]["cells_virgin"] == 48 and steps[-1]["max_drawdown_m"] > 0
+    assert 0 < s["max_subsidence_inelastic_m"] < s["max_subsidence_m"]
