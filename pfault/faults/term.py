@@ -163,15 +163,26 @@ class FaultTerm:
         return replace(history, slid=history.slid | (self.configuration(x_loc, load, history, exact=False)
                                                      != ct.STICK))
 
-    def settle(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory, t: float
-               ) -> tuple[FaultHistory, int]:
-        """After a converged solve at time t: the intact faces whose traction exceeds their strength break
-        (pfault.faults.breaking); returns the history and how many broke on all ranks (collective). The broken
+    def settle(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory, t: float, error: float = 0.0
+               ) -> tuple[FaultHistory, int | None]:
+        """At time t: the intact faces whose traction at x_loc exceeds their strength break (pfault.faults.
+        breaking); returns the history and how many broke on all ranks (collective). ``error``: a bound on the
+        error of each traction component at x_loc (Pa; a Newton iterate's, ``settle_change``'s norm; 0 at a
+        converged state): where it leaves a face's verdict open, nothing breaks and the count is None. The broken
         set depends on each face's own traction only."""
         t_eff = load.effective(self.tractions(x_loc))
-        new = br.exceeding(self.laws.strength, t_eff, history.broken)
-        n = self.faces.mpi.allreduce(int(np.count_nonzero(new)), op=MPI.SUM)
-        return (history.with_breaks(new, t) if n else history), n
+        new, undecided = br.verdicts(self.laws.strength, t_eff, history.broken, error)
+        n, n_open = self.faces.mpi.allreduce(np.array([np.count_nonzero(new), np.count_nonzero(undecided)]),
+                                             op=MPI.SUM)
+        if n_open:
+            return history, None
+        return (history.with_breaks(new, t) if n else history), int(n)
+
+    def settle_change(self, dx_loc: np.ndarray) -> float:
+        """The size of a change dx_loc of the iterate in what ``settle`` reads: the largest change of a face's
+        traction component (Pa) on all ranks."""
+        d = dx_loc[self.faces.lm_dofs]
+        return self.faces.mpi.allreduce(float(np.abs(d).max()) if d.size else 0.0, op=MPI.MAX)
 
     # -- the laws ----------------------------------------------------------------------------------
     def tractions(self, x_loc: np.ndarray) -> np.ndarray:
