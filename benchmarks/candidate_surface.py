@@ -9,7 +9,7 @@ Two scenes, each meshed here with benchmarks/basin_fault_mesh.py at --size (m):
 - ``basin``: config/basin_fault.opts (a basin-bounding plane dipping 60 degrees, 300 m of sediments in its hanging
   wall over rock, 40 m of drawdown in the sediments over 10 years);
 - ``layered``: a plane dipping 50 degrees through three sediment layers (clay, sand, clay: --layers 60,240) over
-  rock in its hanging wall, rock in its footwall, drawdown 15, 60 and 30 m in the three layers (``LAYERED``).
+  rock in its hanging wall, rock in its footwall, drawdown 25, 100 and 50 m in the three layers (``LAYERED``).
 Each scene runs as it is (a pre-existing fault, c = 0), then with its plane a candidate surface (``CANDIDATE``:
 tensile strength 20 kPa, cohesion 50 kPa, residual cohesion 0), with this checkout on --ranks and on 1 rank, and
 with the checkout at --reference (pfault before breaking moved into Newton: main at 526008b, which runs the same
@@ -70,10 +70,10 @@ LAYERED = """# A plane dipping 50 degrees between a basin's layered sediments an
 -pfault_bc_ymax_type roller
 -pfault_geostatic true
 -pfault_water_table 0
-# loading: the aquifer drawn down 60 m over 10 years, the clays above and below it half and a quarter as much
--pfault_material_basin1_head_drawdown 0:0,10*year:15
--pfault_material_basin2_head_drawdown 0:0,10*year:60
--pfault_material_basin3_head_drawdown 0:0,10*year:30
+# loading: the aquifer drawn down 100 m over 10 years, the clay below it half as much, the clay above a quarter
+-pfault_material_basin1_head_drawdown 0:0,10*year:25
+-pfault_material_basin2_head_drawdown 0:0,10*year:100
+-pfault_material_basin3_head_drawdown 0:0,10*year:50
 # time
 -pfault_time_end 10*year
 -pfault_time_steps 10
