@@ -166,15 +166,18 @@ class FaultTerm:
         return replace(history, slid=history.slid | (self.configuration(x_loc, load, history, exact=False)
                                                      != ct.STICK))
 
-    def settle(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory, t: float
-               ) -> tuple[FaultHistory, int]:
-        """After a converged solve at time t: the intact faces whose traction exceeds their strength break
-        (pfault.faults.breaking); returns the history and how many broke on all ranks (collective). The broken
-        set depends on each face's own traction only."""
-        t_eff = load.effective(self.tractions(x_loc))
-        new = br.exceeding(self.laws.strength, t_eff, history.broken)
-        n = self.faces.mpi.allreduce(int(np.count_nonzero(new)), op=MPI.SUM)
-        return (history.with_breaks(new, t) if n else history), n
+    def settle(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory, t: float, error: float = 0.0
+               ) -> tuple[FaultHistory, int | None]:
+        """At time t: the intact faces whose traction at x_loc exceeds their strength break (``settled``; the set
+        depends on each face's own traction only). ``error``: a bound on the error of each traction component at
+        x_loc (Pa, ``settle_change``'s norm; 0 at a converged state). Collective."""
+        return settled(self.faces.mpi, self.laws.strength, load.effective(self.tractions(x_loc)), history, t, error)
+
+    def settle_change(self, dx_loc: np.ndarray) -> float:
+        """The size of a change dx_loc of the iterate in what ``settle`` reads: the largest change of a face's
+        traction component (Pa) on all ranks."""
+        d = dx_loc[self.faces.lm_dofs]
+        return self.faces.mpi.allreduce(float(np.abs(d).max()) if d.size else 0.0, op=MPI.MAX)
 
     # -- the laws ----------------------------------------------------------------------------------
     def tractions(self, x_loc: np.ndarray) -> np.ndarray:
@@ -326,3 +329,16 @@ class FaultTerm:
                           break_time=np.array(arrays["break_time"], dtype=float) if "broken" in arrays
                           else np.full(nf, np.nan))
         return self.begin_step(x_loc, load, history)
+
+
+def settled(mpi: Any, strength: br.FaceStrength, t_eff: np.ndarray, history: FaultHistory, t: float, error: float
+            ) -> tuple[FaultHistory, int | None]:
+    """FaultTerm.settle at the owned faces' effective tractions t_eff: the history with the intact faces that
+    exceed their strength (pfault.faults.breaking) broken at time t and their number on all ranks, or the history
+    and None where ``error`` (a bound on the error of each traction component, Pa) leaves a face's verdict open
+    on some rank: then nothing breaks. Collective."""
+    new, undecided = br.verdicts(strength, t_eff, history.broken, error)
+    n, n_open = mpi.allreduce(np.array([np.count_nonzero(new), np.count_nonzero(undecided)]), op=MPI.SUM)
+    if n_open:
+        return history, None
+    return (history.with_breaks(new, t) if n else history), int(n)
