@@ -48,6 +48,10 @@ SPECS = [
     _s("pfault_box_materials", "names", "soil", "", "material names from the top layer down"),
     _s("pfault_box_interfaces", "list", "", "m", "depths below the surface of the interfaces between the "
        "layers of -pfault_box_materials (one fewer than materials)"),
+    _s("pfault_mesh_cache", "string", "~/.cache/pfault/meshes", "", "directory where the meshes of the wuxi and "
+       "queretaro generators are kept between runs, each under the SHA-256 of its options and the generator's code "
+       "version, so that gmsh meshes a geometry once (default: $XDG_CACHE_HOME/pfault/meshes when set); none: mesh "
+       "every run"),
     _s("pfault_mesh_size_factor", "real", 1.0, "", "element size multiplier of the built-in case-study meshes "
        "(2: ~8x fewer cells; ~4x at wuxi, whose thin layers bound the element height)"),
     _s("pfault_wuxi_ridge_x", "quantity", 1000.0, "m", "wuxi: x of the bedrock ridge crest and of the vertical "
