@@ -248,8 +248,11 @@ SPECS = [
     _s("pfault_hazard_strain_threshold", "quantity", 2e-4, "", "horizontal tensile strain of the land surface "
        "above which it is fissure-prone (2e-4: within the 1e-4 to 7e-4 measured across active earth fissures): "
        "summary.json's fissure-prone length and area"),
-    _s("pfault_figures", "bool", True, "", "write PNG figures next to the output at the end of the run: fault "
-       "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map"),
+    _s("pfault_figures", "choice", "apart", "", "PNG figures next to the output at the end of the run (fault "
+       "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map): apart, drawn by a "
+       "process of their own that the run starts once its summary.json is written and does not wait for (a few "
+       "seconds later; its messages in figures.log); true, drawn by the run before it ends; false, none",
+       choices=("apart", "true", "false")),
 ]
 
 _PLACEHOLDERS = ("<material>", "<surface>", "<fault>")

@@ -198,14 +198,20 @@ class RunOutput:
         if self.fields is not None:
             self.fields.close()
 
-    def finish(self, summary: dict, figures: bool) -> None:
-        """Rank 0: the final summary.json, then the figures."""
+    def finish(self, summary: dict, figures: str) -> None:
+        """Rank 0: the final summary.json, then the figures (-pfault_figures: ``apart``, started in a process of
+        their own, pfault.io.figures_apart; ``true``, drawn here; ``false``, none)."""
         if self.writer is None:
             return
         self.writer.write_summary(summary)
         self.writer.commit()
         self.writer.close()
-        if figures and not summary["interrupted"]:
+        if figures == "apart" and not summary["interrupted"]:
+            from . import figures_apart
+            pid = figures_apart.start(self.writer.dir)
+            PETSc.Sys.Print(f"pfault: figures drawn apart by process {pid} into {self.writer.dir} (python -m "
+                            f"pfault.io.figures {self.writer.dir} draws them again)")
+        elif figures == "true" and not summary["interrupted"]:
             t0 = time.perf_counter()
             paths = write_run_figures(self.writer.dir)
             PETSc.Sys.Print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
