@@ -32,11 +32,13 @@ import subprocess
 import sys
 import time
 
+import h5py
 import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
-from studies.run import command, mpi_env, read_summary  # noqa: E402
+from pfault.post.rundir import read_summary  # noqa: E402
+from studies.run import command, mpi_env  # noqa: E402
 
 CANDIDATE = ["-pfault_fault_fault_tensile_strength", "20*kPa", "-pfault_fault_fault_cohesion", "50*kPa",
              "-pfault_fault_fault_residual_cohesion", "0"]
@@ -123,7 +125,6 @@ def run(tree: str, scene: str, mesh: str, out: str, ranks: int, extra: list, tim
 
 def breaks(run_dir: str) -> list:
     """(time, broken, break time) of every output step of a run's fault.h5 (faces in the serial order)."""
-    import h5py
     with h5py.File(os.path.join(run_dir, "fault.h5"), "r") as f:
         groups = [f["steps"][k] for k in sorted(f["steps"], key=int)]
         return [(float(g.attrs["time"]), g["broken"][()] != 0, g["break_time"][()]) for g in groups]
