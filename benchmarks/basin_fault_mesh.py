@@ -1,13 +1,14 @@
 #!/usr/bin/env python
 """Mesh of a basin-bounding normal fault for config/basin_fault.opts (gmsh MSH 4.1).
 
-    .venv/bin/python benchmarks/basin_fault_mesh.py runs/basin_fault.msh [--size 95] [--dip 60]
+    .venv/bin/python benchmarks/basin_fault_mesh.py runs/basin_fault.msh [--size 95] [--dip 60] [--layers 60,240]
 
 A 3 km x 1.5 km x 600 m block. A planar fault crosses it from the land surface at x = 1200 m to the bottom,
 dipping --dip degrees towards +x, and reaches the four other boundaries it meets. The hanging wall (beyond the
-fault) holds 300 m of basin sediments (material `basin`) over rock; the footwall is rock. Physical surfaces:
-xmin, xmax, ymin, ymax, bottom, top, fault. Element size --size (m) away from the fault, half of it within
-one size of the fault: 95 m gives about 37,000 tetrahedra and 1,150 fault faces.
+fault) holds 300 m of basin sediments (material `basin`) over rock; the footwall is rock. With --layers (depths
+in m, within the sediments) the sediments are layers `basin1`, `basin2`, ... from the top, split at those
+depths. Physical surfaces: xmin, xmax, ymin, ymax, bottom, top, fault. Element size --size (m) away from the
+fault, half of it within one size of the fault: 95 m gives about 37,000 tetrahedra and 1,150 fault faces.
 """
 import argparse
 import math
@@ -17,7 +18,7 @@ import gmsh
 L, W, D, X0, SED = 3000.0, 1500.0, 600.0, 1200.0, 300.0
 
 
-def build(out, size, dip):
+def build(out, size, dip, layers=()):
     cot = 1.0 / math.tan(math.radians(dip))
 
     def fault_x(z):
@@ -32,18 +33,24 @@ def build(out, size, dip):
         p = [occ.addPoint(fault_x(e), -e, e), occ.addPoint(fault_x(e), W + e, e),
              occ.addPoint(fault_x(-D - e), W + e, -D - e), occ.addPoint(fault_x(-D - e), -e, -D - e)]
         fault = occ.addPlaneSurface([occ.addCurveLoop([occ.addLine(p[i], p[(i + 1) % 4]) for i in range(4)])])
-        base = occ.addRectangle(-e, -e, -SED, L + 2 * e, W + 2 * e)
-        occ.fragment([(3, box)], [(2, fault), (2, base)])
+        depths = sorted(set(layers) | {SED})
+        cuts = [occ.addRectangle(-e, -e, -d, L + 2 * e, W + 2 * e) for d in depths]
+        occ.fragment([(3, box)], [(2, fault)] + [(2, c) for c in cuts])
         occ.synchronize()
         vols = [t for _, t in gmsh.model.getEntities(3)]
         bounding = {s for v in vols for _, s in gmsh.model.getBoundary([(3, v)], oriented=False)}
         gmsh.model.removeEntities([(2, s) for _, s in gmsh.model.getEntities(2) if s not in bounding], recursive=True)
-        rock, basin = [], []
+        rock, basin = [], [[] for _ in depths]
         for v in vols:
             x, _, z = occ.getCenterOfMass(3, v)
-            (basin if (x > fault_x(z) and z > -SED) else rock).append(v)
+            if x > fault_x(z) and z > -SED:
+                basin[sum(-z > d for d in depths)].append(v)
+            else:
+                rock.append(v)
         gmsh.model.addPhysicalGroup(3, rock, name="rock")
-        gmsh.model.addPhysicalGroup(3, basin, name="basin")
+        names = ["basin"] if len(depths) == 1 else [f"basin{k + 1}" for k in range(len(depths))]
+        for name, tags in zip(names, basin):
+            gmsh.model.addPhysicalGroup(3, tags, name=name)
         groups = {k: [] for k in ("xmin", "xmax", "ymin", "ymax", "bottom", "top", "fault")}
         tol = 1e-6
         for _, s in gmsh.model.getEntities(2):
@@ -87,5 +94,9 @@ if __name__ == "__main__":
     ap.add_argument("out")
     ap.add_argument("--size", type=float, default=95.0, help="element size away from the fault (m)")
     ap.add_argument("--dip", type=float, default=60.0, help="fault dip (degrees)")
+    ap.add_argument("--layers", default="", help="depths (m) splitting the basin sediments into layers, e.g. 60,240")
     a = ap.parse_args()
-    print(f"{a.out}: {build(a.out, a.size, a.dip)} tetrahedra")
+    layers = [float(v) for v in a.layers.split(",") if v.strip()]
+    if any(not 0.0 < d < SED for d in layers):
+        raise SystemExit(f"--layers: depths between 0 and {SED:g} m (the sediments' base)")
+    print(f"{a.out}: {build(a.out, a.size, a.dip, layers)} tetrahedra")

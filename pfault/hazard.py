@@ -105,12 +105,17 @@ def _zones(triangles: np.ndarray) -> np.ndarray:
     point, tri = points[order], owner[order]
     same = point[1:] == point[:-1]
     pairs = np.column_stack([tri[:-1][same], tri[1:][same]])     # triangles in turn around every shared point
+    # each triangle's pairs in a row: the smallest label over them by one reduceat (np.minimum.at is ~10x slower)
+    ends = pairs.T.ravel()
+    order = np.argsort(ends, kind="stable")
+    starts = np.flatnonzero(np.r_[True, ends[order][1:] != ends[order][:-1]]) if len(ends) else np.zeros(0, int)
+    target = ends[order][starts]
     label = np.arange(m)
     while True:
         low = np.minimum(label[pairs[:, 0]], label[pairs[:, 1]])
         new = label.copy()
-        np.minimum.at(new, pairs[:, 0], low)
-        np.minimum.at(new, pairs[:, 1], low)
+        if len(target):
+            new[target] = np.minimum(new[target], np.minimum.reduceat(np.tile(low, 2)[order], starts))
         new = new[new]                                  # pointer jumping
         if np.array_equal(new, label):
             break

@@ -46,7 +46,7 @@ class Scene:
     """What the options ask for (every rank): settings, the names the mesh defines, the parts' settings."""
     settings: Any
     restart_dir: str | None
-    figures: bool
+    figures: str                    # -pfault_figures: apart, true or false
     solver_name: str                # -pfault_solver: auto, a name or a path
     material_names: list
     surface_names: list

@@ -50,6 +50,10 @@ SPECS = [
     _s("pfault_box_materials", "names", "soil", "", "material names from the top layer down"),
     _s("pfault_box_interfaces", "list", "", "m", "depths below the surface of the interfaces between the "
        "layers of -pfault_box_materials (one fewer than materials)"),
+    _s("pfault_mesh_cache", "string", "~/.cache/pfault/meshes", "", "directory where the meshes of the wuxi and "
+       "queretaro generators are kept between runs, each under the SHA-256 of its options and the generator's code "
+       "version, so that gmsh meshes a geometry once (default: $XDG_CACHE_HOME/pfault/meshes when set); none: mesh "
+       "every run"),
     _s("pfault_mesh_size_factor", "real", 1.0, "", "element size multiplier of the built-in case-study meshes "
        "(2: ~8x fewer cells; ~4x at wuxi, whose thin layers bound the element height)"),
     _s("pfault_wuxi_ridge_x", "quantity", 1000.0, "m", "wuxi: x of the bedrock ridge crest and of the vertical "
@@ -267,8 +271,11 @@ SPECS = [
     _s("pfault_hazard_strain_threshold", "quantity", 2e-4, "", "horizontal tensile strain of the land surface "
        "above which it is fissure-prone (2e-4: within the 1e-4 to 7e-4 measured across active earth fissures): "
        "summary.json's fissure-prone length and area"),
-    _s("pfault_figures", "bool", True, "", "write PNG figures next to the output at the end of the run: fault "
-       "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map"),
+    _s("pfault_figures", "choice", "apart", "", "PNG figures next to the output at the end of the run (fault "
+       "opening and slip, subsidence map, histories of the maxima, earth-fissure hazard map): apart, drawn by a "
+       "process of their own that the run starts once its summary.json is written and does not wait for (a few "
+       "seconds later; its messages in figures.log); true, drawn by the run before it ends; false, none",
+       choices=("apart", "true", "false")),
     _s("pfault_margins", "bool", True, "", "margins to failure at every output time: the further uniform drawdown "
        "(m of head) of the loaded materials at which each fault face would slip, open or break, from the linear "
        "response of the converged state (fault.h5 margin_*, summary.json faults/NAME/margin, fault_margins.png)"),

@@ -6,6 +6,8 @@ nowhere else. Each is used through petsc4py when the installed version has it.
   default (petsc4py has no binding in any version).
 - ``SNESSetLagPreconditioner``: keeps a direct solver's factors across Newton iterations
   (``pfault.solver.policy.FactorReuse``; petsc4py binds it from 3.19 on).
+- ``SNESConvergedDefault``: SNES's own convergence test, which a convergence test written in Python extends
+  (``pfault.solver.policy.Settling``; petsc4py has no binding in any version).
 """
 
 from __future__ import annotations
@@ -55,3 +57,19 @@ def set_lag_preconditioner(snes: Any, lag: int) -> None:
     err = lib.SNESSetLagPreconditioner(ctypes.c_void_p(snes.handle), lag)
     if err:
         raise RuntimeError(f"SNESSetLagPreconditioner returned {err}")
+
+
+def converged_default(PETSc: Any, snes: Any, its: int, xnorm: float, ynorm: float, fnorm: float) -> int:
+    """SNESConvergedDefault(snes, its, xnorm, ynorm, fnorm): SNES's default test (absolute, relative and step
+    tolerances, divergence, function evaluations) of an iterate; returns its SNESConvergedReason."""
+    lib = _library()
+    int_t = ctypes.c_int64 if PETSc.IntType().itemsize == 8 else ctypes.c_int32
+    real = ctypes.c_double
+    lib.SNESConvergedDefault.argtypes = [ctypes.c_void_p, int_t, real, real, real, ctypes.POINTER(ctypes.c_int),
+                                         ctypes.c_void_p]
+    reason = ctypes.c_int(0)
+    err = lib.SNESConvergedDefault(ctypes.c_void_p(snes.handle), its, xnorm, ynorm, fnorm, ctypes.byref(reason),
+                                   None)
+    if err:
+        raise RuntimeError(f"SNESConvergedDefault returned {err}")
+    return int(reason.value)

@@ -1,14 +1,14 @@
 """A step's record, typed: what solving it cost, what it measured, and its JSON form (summary.json's ``steps``).
 
-The solver policy returns a ``Solve`` for each solve; solves that make one step (sub-steps of a cut step, solves
-again at the step's time after faces broke) combine with ``+``. The time loop measures the converged state
+The solver policy returns a ``Solve`` for each solve; the costs of solves that make one step (sub-steps of a cut
+step, the Newton rounds between which faces broke) combine with ``+``. The time loop measures the converged state
 (the land surface, each term, the pore-pressure source) into a ``StepRecord``, which the observers read and never
 change. ``as_json`` gives the record's keys as summary.json has always had them (docs/outputs.md).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 
@@ -48,9 +48,10 @@ class SolveCost:
 class Solve:
     """A solve at time ``time_s`` (or the solves of one step, combined): how it ended (SNES's ``reason``), its
     cost, and for nonlinear equations the predictor it started from, its absolute tolerance, the null pivots of a
-    singular Jacobian, the sub-steps it was cut into, the solves again at its time after faces broke
-    (``breaking_passes``, ``faces_broken_step``) and the counts of each term's configuration (a fault's faces
-    stuck/slipping/open, a soil's cells compacting on the virgin line: ``counts``, pfault.solver.terms)."""
+    singular Jacobian, the sub-steps it was cut into, the rounds of its Newton solve after which faces broke and
+    the faces broken (``breaking``: ``breaking_passes``, ``faces_broken_step``) and the counts of each term's
+    configuration (a fault's faces stuck/slipping/open, a soil's cells compacting on the virgin line: ``counts``,
+    pfault.solver.terms)."""
     time_s: float
     converged: bool
     reason: int
@@ -62,12 +63,6 @@ class Solve:
     substeps: int = 1
     breaking: tuple[int, int] | None = None
     counts: dict = field(default_factory=dict)
-
-    def then(self, later: Solve) -> Solve:
-        """This solve followed by ``later`` at the same time (a solve again after faces broke): later's outcome
-        and counts, both costs."""
-        return replace(self, cost=self.cost + later.cost, converged=later.converged, reason=later.reason,
-                       counts=later.counts)
 
     def as_json(self) -> dict:
         c = self.cost

@@ -1,15 +1,15 @@
 """The time loop: advance the pore-pressure source, solve the step, measure it, hand the result to the observers.
 
-``Stepper`` solves a step (the policy's solve, then the terms' settling: a fault's faces that broke, solved again
-at the same load until none does), commits the terms' histories and measures the converged state into a typed
-record (pfault.records.StepRecord). An observer has ``step_started(step, t)`` (before the step is solved) and
-``step_done(result)`` (a ``StepResult``); each reads the result, none changes it or the state.
+``Stepper`` solves a step (the policy's solve, in whose Newton solve the terms settle: a fault's faces that
+break), commits the terms' histories and measures the converged state into a typed record (pfault.records.
+StepRecord). An observer has ``step_started(step, t)`` (before the step is solved) and ``step_done(result)`` (a
+``StepResult``); each reads the result, none changes it or the state.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -98,30 +98,12 @@ class Stepper:
         """The margins to failure of the initial state (pfault.margins.MarginStep or None; collective)."""
         return self.margins.measure(self.state, self.state.time)
 
-    def settle(self, t: float, solve: Solve) -> Solve:
-        """After a converged solve at t: the terms settle (a fault's faces whose traction exceeds their strength
-        break, pfault.faults.breaking), and the step is solved again at the same load until none does (a
-        failure redistributes load onto its neighbours, which may fail at the same load). The broken set depends
-        on each face's traction only."""
-        eq, state = self.eq, self.state
-        passes = changed = 0
-        while solve.converged:
-            x_loc = eq.local_array(state.u)
-            settled = [term.settle(x_loc, load, h, t)
-                       for term, load, h in zip(eq.terms, eq.loads.term_loads, state.histories)]
-            n = sum(k for _, k in settled)
-            if n == 0:
-                break
-            state.histories = tuple(h for h, _ in settled)
-            passes, changed = passes + 1, changed + n
-            solve = solve.then(self.solver.solve_step(t))
-        return replace(solve, breaking=(passes, changed)) if eq.terms else solve
-
     def solve(self, t_prev: float, t: float) -> Solve:
-        """Solve the step from t_prev to t (the source advanced to t) and settle the terms; a converged step
-        commits the terms' histories (a fault's faces slipping or open now have slid)."""
+        """Solve the step from t_prev to t (the source advanced to t; the terms settle within its Newton solve: a
+        fault's faces that break, pfault.solver.policy.Settling); a converged step commits the terms' histories
+        (a fault's faces slipping or open now have slid)."""
         eq, state = self.eq, self.state
-        solve = self.settle(t, self.solver.solve_interval(t_prev, t, self.model.settings.max_cuts))
+        solve = self.solver.solve_interval(t_prev, t, self.model.settings.max_cuts)
         if solve.converged and eq.terms:
             x_loc = eq.local_array(state.u)
             state.histories = tuple(term.commit(x_loc, load, h)

@@ -16,6 +16,7 @@ import numpy as np
 from .checks import check_box_indices, check_box_memory
 from .errors import InputError
 from .faults.settings import ContactSettings, FaultSettings
+from .mesh import cache
 from .mesh.box import box_mesh, parse_planes
 from .mesh.geometry import queretaro_mesh, wuxi_mesh
 from .mesh.gmsh_io import read_msh
@@ -148,7 +149,7 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_wuxi_{key}") for key in
                   ("ridge_x", "crest_depth", "bedrock_depth", "ridge_half_width", "interfaces")}
-        return lambda: wuxi_mesh(factor, **params)
+        return _cached(reader, "wuxi", factor, params, wuxi_mesh)
     if settings.mesh_generator == "queretaro":
         factor = reader.get("pfault_mesh_size_factor")
         params = {key: reader.get(f"pfault_queretaro_{key}") for key in ("fault_x", "clay_thickness", "wells",
@@ -157,9 +158,22 @@ def generator_options(reader: OptionReader, settings: Settings, index_bytes: int
         if not reader.has("pfault_queretaro_wells") and reader.has("pfault_flow_wells"):
             # refine where the flow model pumps
             params["wells"] = reader.get("pfault_flow_wells")
-        return lambda: queretaro_mesh(factor, **params)
+        return _cached(reader, "queretaro", factor, params, queretaro_mesh)
     raise InputError(f"-pfault_mesh_generator {settings.mesh_generator}: this generator is not available yet; "
                      "use box, wuxi or queretaro, or give -pfault_mesh_file")
+
+
+def _cached(reader: OptionReader, generator: str, factor: float, params: dict,
+            mesh: Callable[..., SerialMesh]) -> Callable[[], SerialMesh]:
+    """The build of a gmsh generator's mesh through the mesh cache of -pfault_mesh_cache (pfault.mesh.cache): its
+    key is the generator, the options as read and the generator's code version."""
+    directory = reader.get("pfault_mesh_cache")
+    if not reader.has("pfault_mesh_cache"):
+        directory = cache.default_dir()
+    elif directory != cache.NONE:
+        directory = os.path.expanduser(directory)
+    return lambda: cache.cached_mesh(directory, cache.mesh_key(generator, {"size_factor": factor, **params}),
+                                     lambda: mesh(factor, **params))
 
 
 def check_ground_surface(reader: OptionReader, settings: Settings, surface_names: Collection[str]) -> None:

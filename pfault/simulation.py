@@ -20,6 +20,7 @@ from .io.summary import RunSummary
 from .model import Model, build_model
 from .options import OptionReader, check_unused_petsc_options
 from .margins import Margins
+from .post import figures_apart
 from .post.figures import write_run_figures
 from .post.gis import write_gis
 from .solver.policy import StepSolver
@@ -192,14 +193,26 @@ class Simulation:
         summary["wall_s"] = dict(self.wall)
         if self.comm.rank == 0:
             run_dir = self.output.finish(summary)
-            if run_dir is not None and self.model.scene.figures and not summary["interrupted"]:
-                t0 = time.perf_counter()
-                paths = write_run_figures(run_dir)
-                PETSc.Sys.Print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
+            if run_dir is not None and not summary["interrupted"]:
+                self.write_figures(run_dir)
             if self.gis and run_dir is not None:
                 t0 = time.perf_counter()
                 written = write_gis(run_dir)
                 PETSc.Sys.Print(f"pfault: {len(written)} GIS files in gis/ in {time.perf_counter() - t0:.1f} s")
+
+    def write_figures(self, run_dir: str) -> None:
+        """Rank 0: the figures of the finished run as -pfault_figures asks: ``apart``, drawn by a process of their
+        own that this run starts and does not wait for (pfault.post.figures_apart); ``true``, drawn here;
+        ``false``, none."""
+        figures = self.model.scene.figures
+        if figures == "apart":
+            pid = figures_apart.start(run_dir)
+            PETSc.Sys.Print(f"pfault: figures drawn apart by process {pid} into {run_dir} (python -m "
+                            f"pfault.post.figures {run_dir} draws them again)")
+        elif figures == "true":
+            t0 = time.perf_counter()
+            paths = write_run_figures(run_dir)
+            PETSc.Sys.Print(f"pfault: {len(paths)} figures in {time.perf_counter() - t0:.1f} s")
 
     def record_failure(self, line: str, code: int) -> None:
         """Rank 0, after every rank failed together (RunOutput.record_failure)."""

@@ -15,7 +15,10 @@ existed).
 A face leaves the strength surface when its excess over it is more than ``BREAK_TOLERANCE`` of the face's strength
 scale (the largest of its cut-off, its cohesion and the magnitude of its traction): the tractions of a converged
 step are exact to the solver's tolerance, and a face loaded exactly to its strength stays intact. Which faces
-break depends on each face's own traction only, so the broken set does not depend on the partition.
+break depends on each face's own traction only, so the broken set does not depend on the partition. At a Newton
+iterate whose tractions are known to within an error, a face's verdict is settled where the error cannot move its
+traction across that threshold (``verdicts``): the solver breaks faces between Newton iterations only where every
+verdict is settled (pfault.solver.policy.Settling).
 """
 
 from __future__ import annotations
@@ -68,9 +71,35 @@ def excess(strength: FaceStrength, t_eff: np.ndarray) -> np.ndarray:
     return np.maximum(tn - strength.cutoff, shear)
 
 
+def margin(strength: FaceStrength, t_eff: np.ndarray) -> np.ndarray:
+    """How far each face's effective traction (local frame, nf x 3) lies beyond the traction that breaks it (Pa):
+    its excess over the intact strength surface less BREAK_TOLERANCE of its strength scale (the largest of its
+    cut-off, its cohesion and the magnitude of its traction). An intact face breaks where this is positive."""
+    scale = np.maximum.reduce([np.where(np.isfinite(strength.cutoff), strength.cutoff, 0.0), strength.cohesion,
+                               np.linalg.norm(t_eff, axis=1)])
+    return excess(strength, t_eff) - BREAK_TOLERANCE * scale
+
+
+def margin_sensitivity(strength: FaceStrength) -> np.ndarray:
+    """How much each face's ``margin`` can change (Pa) per pascal of change in each of its traction's components:
+    1 through t_N - cut-off, sqrt(2) + tan(phi) through |t_T| + tan(phi) t_N, and sqrt(3) BREAK_TOLERANCE through
+    the strength scale (|t|): sqrt(2) + tan(phi) + sqrt(3) BREAK_TOLERANCE."""
+    return np.sqrt(2.0) + strength.tan_phi + np.sqrt(3.0) * BREAK_TOLERANCE
+
+
+def verdicts(strength: FaceStrength, t_eff: np.ndarray, broken: np.ndarray, error: float = 0.0
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The intact faces of candidate surfaces that break at the effective tractions t_eff (``margin`` positive),
+    and those whose verdict is open: within ``error`` (Pa, a bound on the error of each traction component, as
+    at a Newton iterate; 0 at a converged state) their margin could change sign. Where none is open, the faces
+    that break are those that break at the exact tractions."""
+    intact = ~broken & strength.candidate
+    m = margin(strength, t_eff)
+    reach = error * margin_sensitivity(strength)
+    return intact & (m > 0), intact & (np.abs(m) <= reach) & (error > 0)
+
+
 def exceeding(strength: FaceStrength, t_eff: np.ndarray, broken: np.ndarray) -> np.ndarray:
     """The intact faces whose effective traction exceeds their strength by more than BREAK_TOLERANCE of its
     scale: those that break."""
-    scale = np.maximum.reduce([np.where(np.isfinite(strength.cutoff), strength.cutoff, 0.0), strength.cohesion,
-                               np.linalg.norm(t_eff, axis=1)])
-    return ~broken & strength.candidate & (excess(strength, t_eff) > BREAK_TOLERANCE * scale)
+    return verdicts(strength, t_eff, broken)[0]

@@ -267,3 +267,32 @@ def fault_figures(faces: Any, names: list, lam: np.ndarray, mode: np.ndarray, fa
                      "faces_never": int(sums[k, 2]),
                      "area_within_m2": {f"{thr:g}": float(v) for thr, v in zip(thresholds, sums[k, 3:])}}
     return out
+
+
+class MarginHooks:
+    """A fault term's hooks of the margins to failure (pfault.solver.terms.Term): the load's and the residual's
+    rates per metre of further drawdown, the faces that need the response, and every face's margin. Mixed into
+    pfault.faults.term.FaultTerm (its ``faces``, ``settings``, ``pressure``)."""
+
+    def load_rate(self, t: float, cell_dp: np.ndarray | None, cell_rate: np.ndarray, alpha: np.ndarray,
+                  out: np.ndarray) -> FaultLoadRate:
+        """The rate of ``load`` per metre of further drawdown (``cell_rate``: Pa/m per local cell)."""
+        return load_rate(self, t, cell_dp, cell_rate, alpha, out)
+
+    def residual_rate(self, x_loc: np.ndarray, load: Any, rate: FaultLoadRate, history: Any,
+                      out: np.ndarray) -> None:
+        residual_rate(self, x_loc, load, rate, history, out)
+
+    def margin_parts(self, x_loc: np.ndarray, load: Any, history: Any) -> int:
+        """Faces whose margin needs the response (stuck, not broken), on all ranks. Collective."""
+        return live_faces(self, x_loc, load, history)
+
+    def margins(self, x_loc: np.ndarray, dx_loc: np.ndarray, load: Any, rate: FaultLoadRate,
+                history: Any, mesh: Any, settings: Any) -> FaultMargins:
+        """Every owned face's margin to failure at x_loc, with the state's rate dx_loc, and each fault's figures
+        (``settings``: pfault.solver.terms.MarginSettings). Collective."""
+        lam, mode, failed = face_margins(self, x_loc, dx_loc, load, rate, history)
+        centroids = mesh.coords[self.faces.verts].mean(axis=1) + np.asarray(settings.origin)
+        names = [f.name for f in self.settings]
+        return FaultMargins(lam, mode, settings.rho_g, fault_figures(
+            self.faces, names, lam, mode, failed, centroids, settings.thresholds, settings.rho_g))

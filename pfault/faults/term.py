@@ -81,11 +81,11 @@ def face_laws(faces: FaultFaces, settings: list, face_young: np.ndarray) -> Face
                     br.face_strength(settings, faces.fault))
 
 
-class FaultTerm(TermDefaults):
+class FaultTerm(fm.MarginHooks, TermDefaults):
     """The contact laws of all faults on the faces this rank owns (``faces``), with the condensed face bubbles
     of their cells (``bubbles``) and the pore pressure their laws see (``pressure``). Pure in the history: every
     method takes the faces' history and load and returns values or the next history. ``settings``: the faults'
-    (pfault.faults.settings.FaultSettings, in the scene's order)."""
+    (pfault.faults.settings.FaultSettings, in the scene's order). Its margins to failure: fm.MarginHooks."""
 
     name = "faults"
     rows = "face"           # its history's arrays are per fault face
@@ -167,15 +167,18 @@ class FaultTerm(TermDefaults):
         return replace(history, slid=history.slid | (self.configuration(x_loc, load, history, exact=False)
                                                      != ct.STICK))
 
-    def settle(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory, t: float
-               ) -> tuple[FaultHistory, int]:
-        """After a converged solve at time t: the intact faces whose traction exceeds their strength break
-        (pfault.faults.breaking); returns the history and how many broke on all ranks (collective). The broken
-        set depends on each face's own traction only."""
-        t_eff = load.effective(self.tractions(x_loc))
-        new = br.exceeding(self.laws.strength, t_eff, history.broken)
-        n = self.faces.mpi.allreduce(int(np.count_nonzero(new)), op=MPI.SUM)
-        return (history.with_breaks(new, t) if n else history), n
+    def settle(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory, t: float, error: float = 0.0
+               ) -> tuple[FaultHistory, int | None]:
+        """At time t: the intact faces whose traction at x_loc exceeds their strength break (``settled``; the set
+        depends on each face's own traction only). ``error``: a bound on the error of each traction component at
+        x_loc (Pa, ``settle_change``'s norm; 0 at a converged state). Collective."""
+        return settled(self.faces.mpi, self.laws.strength, load.effective(self.tractions(x_loc)), history, t, error)
+
+    def settle_change(self, dx_loc: np.ndarray) -> float:
+        """The size of a change dx_loc of the iterate in what ``settle`` reads: the largest change of a face's
+        traction component (Pa) on all ranks."""
+        d = dx_loc[self.faces.lm_dofs]
+        return self.faces.mpi.allreduce(float(np.abs(d).max()) if d.size else 0.0, op=MPI.MAX)
 
     # -- the laws ----------------------------------------------------------------------------------
     def tractions(self, x_loc: np.ndarray) -> np.ndarray:
@@ -290,30 +293,6 @@ class FaultTerm(TermDefaults):
         """The output series' fields: fault.h5's of the owned faces (pfault.faults.measures.face_fields)."""
         return {"fault": face_fields(self, x_total, x_rel, load, history, history.slid)}
 
-    # -- margins to failure (pfault.faults.margins) ----------------------------------------------------
-    def load_rate(self, t: float, cell_dp: np.ndarray | None, cell_rate: np.ndarray, alpha: np.ndarray,
-                  out: np.ndarray) -> fm.FaultLoadRate:
-        """The rate of ``load`` per metre of further drawdown (``cell_rate``: Pa/m per local cell)."""
-        return fm.load_rate(self, t, cell_dp, cell_rate, alpha, out)
-
-    def residual_rate(self, x_loc: np.ndarray, load: FaultLoad, rate: fm.FaultLoadRate, history: FaultHistory,
-                      out: np.ndarray) -> None:
-        fm.residual_rate(self, x_loc, load, rate, history, out)
-
-    def margin_parts(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory) -> int:
-        """Faces whose margin needs the response (stuck, not broken), on all ranks. Collective."""
-        return fm.live_faces(self, x_loc, load, history)
-
-    def margins(self, x_loc: np.ndarray, dx_loc: np.ndarray, load: FaultLoad, rate: fm.FaultLoadRate,
-                history: FaultHistory, mesh: Any, settings: Any) -> fm.FaultMargins:
-        """Every owned face's margin to failure at x_loc, with the state's rate dx_loc, and each fault's figures
-        (``settings``: pfault.solver.terms.MarginSettings). Collective."""
-        lam, mode, failed = fm.face_margins(self, x_loc, dx_loc, load, rate, history)
-        centroids = mesh.coords[self.faces.verts].mean(axis=1) + np.asarray(settings.origin)
-        names = [f.name for f in self.settings]
-        return fm.FaultMargins(lam, mode, settings.rho_g, fm.fault_figures(
-            self.faces, names, lam, mode, failed, centroids, settings.thresholds, settings.rho_g))
-
     # -- the checkpoint ------------------------------------------------------------------------------
     def history_arrays(self, history: FaultHistory) -> dict:
         """The history's arrays per owned face (the checkpoint's ``faults/...``): the initial traction (Pa, local
@@ -331,3 +310,16 @@ class FaultTerm(TermDefaults):
                           break_time=np.array(arrays["break_time"], dtype=float) if "broken" in arrays
                           else np.full(nf, np.nan))
         return self.begin_step(x_loc, load, history)
+
+
+def settled(mpi: Any, strength: br.FaceStrength, t_eff: np.ndarray, history: FaultHistory, t: float, error: float
+            ) -> tuple[FaultHistory, int | None]:
+    """FaultTerm.settle at the owned faces' effective tractions t_eff: the history with the intact faces that
+    exceed their strength (pfault.faults.breaking) broken at time t and their number on all ranks, or the history
+    and None where ``error`` (a bound on the error of each traction component, Pa) leaves a face's verdict open
+    on some rank: then nothing breaks. Collective."""
+    new, undecided = br.verdicts(strength, t_eff, history.broken, error)
+    n, n_open = mpi.allreduce(np.array([np.count_nonzero(new), np.count_nonzero(undecided)]), op=MPI.SUM)
+    if n_open:
+        return history, None
+    return (history.with_breaks(new, t) if n else history), int(n)

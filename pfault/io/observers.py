@@ -38,7 +38,7 @@ def progress_line(step: int, rec: dict, candidates: tuple = ()) -> str:
         extra += "  broken " + ", ".join(f"{name} {rec['faults'][name]['faces_broken']}" for name in candidates)
         if rec.get("breaking_passes"):
             n = rec["breaking_passes"]
-            extra += f" (+{rec['faces_broken_step']} in {n} pass{'es' if n > 1 else ''})"
+            extra += f" (+{rec['faces_broken_step']} in {n} round{'s' if n > 1 else ''})"
     if "cells_virgin" in rec:
         extra += f"  virgin/elastic cells {rec['cells_virgin']}/{rec['cells_elastic']}"
     if "max_subsidence_m" in rec:

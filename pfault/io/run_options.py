@@ -28,7 +28,7 @@ from .output import read_options
 # The observations (stations, LOS raster) are output: their own check says whether that run has the same ones
 # (pfault.io.observations)
 RESTART_MAY_CHANGE = re.compile(r"^pfault_(scene|output_.*|figures|solver|contact_monitor|time_.*|restart|restart_.*|"
-                                r"stations|insar_.*)$")
+                                r"stations|insar_.*|mesh_cache)$")
 
 # the loading tables: (their option names, what they load, its unit in SI, its value when none is given)
 LOADING = ((re.compile(r"^pfault_material_(.+)_head_drawdown$"), "pore-pressure change of {}", "Pa", 0.0),

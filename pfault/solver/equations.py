@@ -154,6 +154,24 @@ class Equations:
         return tuple(term.configuration(x_loc, load, h, exact)
                      for term, load, h in zip(self.terms, self.loads.term_loads, histories))
 
+    def settle(self, x: Any, histories: tuple, t: float, errors: tuple | None = None) -> tuple[tuple, int | None]:
+        """The terms' histories settled at the iterate x of a solve at time t (pfault.solver.terms: a fault's faces
+        that break) and how many of their parts changed on all ranks, or None where a term's verdict is open within
+        its error (``errors``: one per term, a bound on the error of what it reads at x; None: x is converged).
+        Collective."""
+        x_loc = self.local_array(x)
+        errors = errors if errors is not None else (0.0,) * len(self.terms)
+        settled = [term.settle(x_loc, load, h, t, e)
+                   for term, load, h, e in zip(self.terms, self.loads.term_loads, histories, errors)]
+        if any(n is None for _, n in settled):
+            return histories, None
+        return tuple(h for h, _ in settled), sum(n for _, n in settled)
+
+    def settle_changes(self, dx: Any) -> tuple:
+        """Each term's size of the change dx of the iterate in what its ``settle`` reads. Collective."""
+        dx_loc = self.local_array(dx)
+        return tuple(term.settle_change(dx_loc) for term in self.terms)
+
     def trial_configuration(self, histories: tuple) -> tuple:
         return tuple(term.trial_configuration(h) for term, h in zip(self.terms, histories))
 

@@ -21,6 +21,8 @@ The policy's constants, each measured where it was chosen:
   problem's factorisation is counted up to 1.6 times too cheap, which only refactors it a little sooner.
 - The per-step nonlinear tolerance: unless -snes_atol is given, a fault step converges once |F| <= -snes_rtol
   times the forces of the problem (``StepSolver.load_tolerance``).
+- ``VERDICT_CONTRACTION``: the largest contraction of Newton's last two steps at which the terms' verdicts are
+  taken at an iterate rather than at convergence (``Settling``).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from petsc4py import PETSc
 
 from ..effects import event_total
 from ..records import Solve, SolveCost, counts_text
-from ..petsc_compat import set_lag_preconditioner
+from ..petsc_compat import converged_default, set_lag_preconditioner
 from .fieldsplit import FieldSplit
 from .setup import apply_solver_defaults, is_direct
 
@@ -43,6 +45,7 @@ KSP_ATOL_FRACTION = 0.1     # Krylov tolerance of a fault step, relative to its 
 SINGULAR_MAX_IT = 10        # Krylov iterations of a solve on factors with null pivots
 REUSE_ITERATIONS_PER_FACE = 6   # Krylov iterations per changed face on kept factors (3 rows, doubled for drift)
 FACTOR_FLOP_RATE = 8.0          # MUMPS's factorisation flops per second over an FGMRES iteration's on its factors
+VERDICT_CONTRACTION = 0.1       # Newton's contraction below which an iterate's error is estimated from its steps
 
 
 def factorizations() -> int:
@@ -152,6 +155,115 @@ def factorisation_cost(ksp: Any) -> float | None:
     return F.getMumpsRinfog(3) / (FACTOR_FLOP_RATE * (2.0 * entries + 2.0 * nnz))
 
 
+class Settling:
+    """SNES's convergence test with the terms' settling between Newton iterations: a fault's intact faces whose
+    traction exceeds their strength break within the Newton solve of a step, at the step's time, for good.
+
+    The faces that break are those whose traction exceeds their strength at the solution with the faces broken so
+    far: each face on its own traction, all of them at once (the fracture front runs a row of faces at a time as
+    its load moves on), so the broken set depends neither on the partition nor on the order of the faces. Those
+    verdicts are taken at the first iterate where they are settled:
+
+    - at an iterate that SNES's own test (SNESConvergedDefault) finds converged, as they stand;
+    - earlier, at an iterate whose error is estimated from Newton's last two steps: where the faces' configuration
+      (stick/slip/open) is that of the step that led to the iterate, and that step is smaller than the one before
+      by Theta = |dx_j| / |dx_j-1| <= VERDICT_CONTRACTION (sizes in what each term reads, a fault's the largest
+      change of a face's traction component), the steps to come sum to at most Theta / (1 - Theta) |dx_j| while
+      each shrinks by Theta at least (Newton's shrink faster: quadratically). The verdicts are taken there only
+      where that error leaves none open (pfault.faults.breaking.verdicts); the broken set is then the one the
+      converged iterate would give.
+
+    When parts changed (faces broke), the test ends the SNES solve (CONVERGED_ITS, ``changed`` > 0) and the policy
+    runs Newton again from that iterate with the new history (``StepSolver.newton``): neither the step's predictor
+    nor its start is redone, so the faces that slid go on sliding from where they were, and each round has SNES's
+    iteration budget and divergence test from its own first residual. The step's solution is that of its load with
+    the final broken set, from the step's start: how the broken set was found leaves no trace in it.
+
+    Measured with the verdicts taken early but acted on only at convergence, to compare the two: in 67 rounds
+    (config/basin_fault.opts with its fault a candidate surface, T = 20 kPa, c = 50 kPa, c_r = 0, at
+    benchmarks/basin_fault_mesh.py's 95 m; a layered basin as benchmarks/candidate_surface.py's; the fissure
+    box's cascade of tests/verification/test_breaking.py; config/wuxi_fissure.opts at size factor 2) every early
+    verdict was the converged iterate's, taken at the second iterate of its round in 63 of them, at the third in
+    4; the steps to come summed to 1.1-38 % of the estimate, the closest face 73 Pa from its threshold.
+    benchmarks/candidate_surface.py compares the broken sets and break times with the per-pass scheme's (the step
+    solved again at the same load after every row, from an elastic trial and a new start: 6 Newton iterations a
+    row on the basin fault, against 2)."""
+
+    def __init__(self, equations: Any, state: Any, monitor: bool = False) -> None:
+        self.eq, self.state, self.monitor = equations, state, monitor
+        self.mpi = equations.comm.tompi4py()
+        self.t = 0.0
+        self.changed = 0        # parts changed (faces broken) in the SNES solve that ended, 0 if none
+        self._steps: tuple | None = None    # the terms' sizes of Newton's last step
+        self._config: np.ndarray | None = None
+
+    def begin(self, t: float) -> None:
+        """Before a SNES solve at time t."""
+        self.t, self.changed = float(t), 0
+
+    def __call__(self, snes: Any, its: int, norms: tuple[float, float, float]) -> int:
+        reason = converged_default(PETSc, snes, its, *norms)
+        if reason < 0:
+            return reason
+        errors = self.iterate_errors(snes, its) if reason == 0 else None
+        if reason == 0 and errors is None:
+            return reason
+        histories, n = self.eq.settle(snes.getSolution(), self.state.histories, self.t, errors)
+        if not n:
+            return reason
+        self.state.histories, self.changed = histories, n
+        if self.monitor:
+            where = "converged" if errors is None else f"error {max(errors):.3g}"
+            PETSc.Sys.Print(f"  settled at newton {its} ({where}): {n} parts changed (faces broke)")
+        return int(PETSc.SNES.ConvergedReason.CONVERGED_ITS)
+
+    def iterate_errors(self, snes: Any, its: int) -> tuple | None:
+        """The terms' estimated errors at the iterate ``its`` of a SNES solve (in their ``settle_change`` norms;
+        see the class), or None where no estimate holds. Collective."""
+        x = snes.getSolution()
+        config = np.concatenate(self.eq.configuration(x, self.state.histories))
+        steps = self.eq.settle_changes(snes.getSolutionUpdate()) if its > 0 else None
+        previous, before = self._steps, self._config
+        self._steps, self._config = steps, config
+        if steps is None or previous is None:
+            return None
+        same = before is not None and len(before) == len(config) and bool(np.array_equal(before, config))
+        if not self.mpi.allreduce(same, op=MPI.LAND):
+            return None
+        errors = []
+        for step, prior in zip(steps, previous):
+            if step == 0.0:
+                errors.append(0.0)
+                continue
+            theta = step / prior if prior > 0.0 else np.inf
+            if theta > VERDICT_CONTRACTION:
+                return None
+            errors.append(step * theta / (1.0 - theta))
+        return tuple(errors)
+
+
+class ConfigurationMonitor:
+    """SNES's monitor for -pfault_contact_monitor: the terms' configurations at each Newton iterate (a fault's
+    faces stuck, slipping and open, a soil's cells compacting on the virgin line) and how many changed since the
+    last iterate."""
+
+    def __init__(self, equations: Any, state: Any) -> None:
+        self.eq, self.state = equations, state
+        self.mpi = equations.comm.tompi4py()
+        self.last: np.ndarray | None = None
+
+    def __call__(self, snes: Any, its: int, fnorm: float) -> None:
+        x = snes.getSolution()
+        st = np.concatenate(self.eq.configuration(x, self.state.histories, exact=False))
+        prev = self.last if its > 0 and self.last is not None else st
+        changed = self.mpi.allreduce(int(np.count_nonzero(prev != st)), op=MPI.SUM)
+        self.last = st
+        counts = self.eq.counts(x, self.state.histories)
+        what = " and ".join(w for k, w in (("stick", "faces"), ("cells_virgin", "cells")) if k in counts)
+        PETSc.Sys.Print(f"  newton {its:2d}  |F| {fnorm:.3e}  {counts_text(counts)}"
+                        + (f"  ({changed} {what} changed state)" if its else ""))
+
+
 class StepSolver:
     """Solves the equations for one time after another, advancing ``state``: owns the SNES (created once, code
     defaults where the user is silent, then -snes_*/-ksp_*/-pc_* options), the nonlinear steps' tolerances and
@@ -164,7 +276,6 @@ class StepSolver:
         self.monitor = monitor
         self.F = equations.create_vec()
         self.reuse: FactorReuse | None = None
-        self._monitor_state = None
         nonlinear = not equations.linear
         if nonlinear:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
@@ -179,10 +290,12 @@ class StepSolver:
         snes.setJacobian(self._jacobian, equations.J, equations.J)
         snes.setFromOptions()
         self.split = FieldSplit(equations, snes.getKSP().getPC())
+        self.settling = Settling(equations, state, monitor)
         if nonlinear:
             snes.setConvergenceHistory()
+            snes.setConvergenceTest(self.settling)
             if monitor:
-                snes.setMonitor(self._print_states)
+                snes.setMonitor(ConfigurationMonitor(equations, state))
         snes.setUp()
         ksp = snes.getKSP()
         ksp.setOperators(equations.J, equations.J)
@@ -205,19 +318,6 @@ class StepSolver:
         states = self.eq.assemble_jacobian(x, J, self.state.histories, config)
         if states is not None and self.reuse is not None:
             self.reuse.decide(snes, states)
-
-    def _print_states(self, snes: Any, its: int, fnorm: float) -> None:
-        """-pfault_contact_monitor: the terms' configurations at each Newton iterate (a fault's faces stuck,
-        slipping and open, a soil's cells compacting on the virgin line) and how many changed."""
-        x = snes.getSolution()
-        st = np.concatenate(self.eq.configuration(x, self.state.histories, exact=False))
-        prev = self._monitor_state if its > 0 else st
-        changed = self.comm.tompi4py().allreduce(int(np.count_nonzero(prev != st)), op=MPI.SUM)
-        self._monitor_state = st
-        counts = self.eq.counts(x, self.state.histories)
-        what = " and ".join(w for k, w in (("stick", "faces"), ("cells_virgin", "cells")) if k in counts)
-        PETSc.Sys.Print(f"  newton {its:2d}  |F| {fnorm:.3e}  {counts_text(counts)}"
-                        + (f"  ({changed} {what} changed state)" if its else ""))
 
     # -- linear solves ---------------------------------------------------------------------------------
     def solve_linear(self, A: Any, b: Any, x: Any) -> int:
@@ -250,7 +350,8 @@ class StepSolver:
     # -- one step ------------------------------------------------------------------------------------
     def solve_step(self, t: float) -> Solve:
         """Solve for time t from the converged state (at state.time). Nonlinear equations: SNES runs the
-        semismooth Newton from the step's predictor (``predict``)."""
+        semismooth Newton from the step's predictor (``predict``), the terms settling between its iterations
+        (``newton``: a fault's faces that break)."""
         eq, state, snes = self.eq, self.state, self.snes
         nonlinear = not eq.linear
         t0 = time.perf_counter()
@@ -265,26 +366,46 @@ class StepSolver:
         if nonlinear:
             self.load_tolerance()
             trial = self.predict(t)
-            snes.setConvergenceHistory(reset=True)
-        snes.solve(None, state.u)
-        reason = snes.getConvergedReason()
-        its = int(snes.getIterationNumber())
-        cost = SolveCost(its, int(snes.getLinearSolveIterations()), time.perf_counter() - t0)
-        out = Solve(float(t), bool(reason > 0), int(reason), cost)
+            out = self.newton(t)
+        else:
+            snes.solve(None, state.u)
+            reason = int(snes.getConvergedReason())
+            out = Solve(float(t), reason > 0, reason,
+                        SolveCost(int(snes.getIterationNumber()), int(snes.getLinearSolveIterations())))
+        out = replace(out, cost=replace(out.cost, wall_s=time.perf_counter() - t0))
         if nonlinear:
             out = self._nonlinear_record(out, trial, nfact, njac)
         if out.converged:
             if start is not None and t > state.time:
-                # (a solve again at the same time, after faces broke, keeps the predictor's history)
                 state.set_previous(state.time, start)
             state.time = float(t)
         if start is not None:
             start.destroy()
         return out
 
+    def newton(self, t: float) -> Solve:
+        """The semismooth Newton of a step at time t from state.u (SNES), with the terms' settling between its
+        iterations (``Settling``): after each round in which faces broke, Newton again from the iterate where they
+        broke. The solve's record: SNES's last reason, the rounds' iterations and residual histories, and the
+        rounds and faces broken (``breaking``)."""
+        snes, settling = self.snes, self.settling
+        cost, rounds, changed = SolveCost(), 0, 0
+        while True:
+            settling.begin(t)
+            snes.setConvergenceHistory(reset=True)
+            snes.solve(None, self.state.u)
+            its = int(snes.getIterationNumber())
+            history = tuple(float(v) for v in snes.getConvergenceHistory()[0][:its + 1])
+            cost = cost + SolveCost(its, int(snes.getLinearSolveIterations()), residual_history=history)
+            if not settling.changed:
+                break
+            rounds, changed = rounds + 1, changed + settling.changed
+        reason = int(snes.getConvergedReason())
+        return Solve(float(t), reason > 0, reason, cost, breaking=(rounds, changed))
+
     def _nonlinear_record(self, out: Solve, trial: tuple | None, nfact: int, njac: int) -> Solve:
         snes, c = self.snes, out.cost
-        history = tuple(float(v) for v in snes.getConvergenceHistory()[0][:c.newton_its + 1])
+        history = c.residual_history
         newton, krylov, predictor = c.newton_its, c.ksp_its, "extrapolated"
         if trial is not None:
             predictor = "elastic trial"
@@ -406,7 +527,7 @@ def cut_step(solve_step: Callable[[float], Solve], state: Any, t_prev: float, t:
         out = solve_step(t)
         if out.converged:
             return out
-        tried = [out]
+        tried, attempt = [out], [out]
         cuts = 0
         while not out.converged and cuts < max_cuts:
             cuts += 1
@@ -414,9 +535,11 @@ def cut_step(solve_step: Callable[[float], Solve], state: Any, t_prev: float, t:
             state.restore(before)
             if verbose:
                 PETSc.Sys.Print(f"  step not converged ({out.reason}): retrying as {n} sub-steps")
+            attempt = []
             for k in range(1, n + 1):
                 out = solve_step(t_prev + (t - t_prev) * k / n)
                 tried.append(out)
+                attempt.append(out)
                 if not out.converged:
                     break
     finally:
@@ -424,5 +547,7 @@ def cut_step(solve_step: Callable[[float], Solve], state: Any, t_prev: float, t:
     cost = tried[0].cost
     for r in tried[1:]:
         cost = cost + r.cost
+    broke = [r.breaking for r in attempt if r.breaking is not None]
     return replace(out, cost=cost, time_s=float(t), substeps=2 ** cuts,
-                   null_pivots=max(r.null_pivots for r in tried))
+                   null_pivots=max(r.null_pivots for r in tried),
+                   breaking=tuple(map(sum, zip(*broke))) if broke else None)

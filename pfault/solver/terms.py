@@ -21,9 +21,12 @@ The protocol (methods a term has; collective where it says so):
   start's is not the elastic gravity solve's (a material with memory's: the overburden).
 - Histories: ``initial_history()``; ``prestressed(sigma0, x_loc, load, history)`` the history from an initial
   stress (the multipliers it sets in x_loc); ``begin_step(x_loc, load, history)`` at the start of a solve;
-  ``commit(x_loc, load, history)`` after a converged step; ``settle(x_loc, load, history, t)`` the history after a
-  converged solve and how many of its parts changed on all ranks (faces that broke: the solve is repeated at the
-  same load until none does).
+  ``commit(x_loc, load, history)`` after a converged step; ``settle(x_loc, load, history, t, error=0.0)`` the
+  history at the iterate x_loc of a solve at time t and how many of its parts changed on all ranks (faces that
+  broke: Newton goes on from x_loc with the new history until none does), or None where ``error`` (a bound on the
+  error of what it reads at x_loc, in ``settle_change``'s norm; 0 at a converged state) leaves a part open;
+  ``settle_change(dx_loc)`` (collective) the size of a change of the iterate in what ``settle`` reads (a fault:
+  the largest change of a face's traction component).
 - The discrete configuration (its active set: a fault face's stick/slip/open): ``configuration(x_loc, load,
   history, exact)`` (exact: the branches the residual takes; else as reported), ``trial_configuration(history)``
   (a step's elastic trial), ``jacobian_varies(configuration)`` (collective: whether the Jacobian depends on more
@@ -101,7 +104,10 @@ class Term(Protocol):
 
     def commit(self, x_loc: np.ndarray, load: Any, history: Any) -> Any: ...
 
-    def settle(self, x_loc: np.ndarray, load: Any, history: Any, t: float) -> tuple[Any, int]: ...
+    def settle(self, x_loc: np.ndarray, load: Any, history: Any, t: float, error: float = 0.0
+               ) -> tuple[Any, int | None]: ...
+
+    def settle_change(self, dx_loc: np.ndarray) -> float: ...
 
     def configuration(self, x_loc: np.ndarray, load: Any, history: Any, exact: bool = True) -> np.ndarray: ...
 

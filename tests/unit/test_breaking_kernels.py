@@ -57,3 +57,37 @@ def test_a_pre_existing_fault_never_breaks_and_tension_breaks_a_cohesionless_can
     assert list(br.exceeding(s, t, s.initially_broken())) == [False, True]
     # compressed and unsheared: inside every strength surface
     assert not br.exceeding(s, np.array([[-1e5, 0, 0], [-1e5, 0, 0]]), np.zeros(2, bool)).any()
+
+
+def test_margin_changes_at_most_by_its_sensitivity_times_the_traction_error():
+    """breaking.margin_sensitivity bounds how far a face's margin moves when each traction component moves by at
+    most e (max norm): sampled on tractions in tension, shear and compression, the worst ratio reaches the bound
+    within 2 % and never passes it."""
+    rng = np.random.default_rng(7)
+    s = strength(settings(), n=4000)
+    t = rng.normal(0.0, 80e3, (4000, 3))
+    e = 5e3
+    worst = 0.0
+    for _ in range(20):
+        d = rng.choice([-e, e], size=t.shape) * rng.uniform(0.0, 1.0, (len(t), 1)) ** 0.1
+        change = np.abs(br.margin(s, t + d) - br.margin(s, t))
+        worst = max(worst, float(np.max(change / (e * br.margin_sensitivity(s)))))
+    assert 0.98 < worst <= 1.0
+
+
+def test_a_verdict_is_open_where_the_error_can_move_the_traction_across_the_threshold():
+    """At tractions known to within e, a face breaks for sure beyond sensitivity x e past its threshold, stays for
+    sure short of it by as much, and is open between; with e = 0 the verdicts are exceeding's."""
+    s = strength(settings(), n=6)
+    e = 100.0
+    reach = e * br.margin_sensitivity(s)[0]
+    t = np.zeros((6, 3))
+    t[:, 0] = 50e3 + np.array([-2.0, -0.5, -1e-3, 1e-3, 0.5, 2.0]) * reach     # around the cut-off T = 50 kPa
+    new, undecided = br.verdicts(s, t, np.zeros(6, bool), e)
+    assert list(undecided) == [False, True, True, True, True, False]
+    assert list(new) == [False, False, False, True, True, True]
+    exact, none_open = br.verdicts(s, t, np.zeros(6, bool))
+    assert list(exact) == list(br.exceeding(s, t, np.zeros(6, bool))) and not none_open.any()
+    # a broken face has no verdict, open or not
+    _, undecided = br.verdicts(s, t, np.ones(6, bool), e)
+    assert not undecided.any()

@@ -26,7 +26,8 @@ NOT_DATA = {"pfault_scene": "a name", "pfault_output_dir": "the output directory
             "pfault_ground_surface": "a surface of the mesh", "pfault_heads_time_unit": "a unit",
             "pfault_solver": "an options file (its options are in options.txt)",
             "pfault_restart": "a run directory (checked by its checkpoint)",
-            "pfault_start_date": "a calendar date"}
+            "pfault_start_date": "a calendar date",
+            "pfault_mesh_cache": "a directory of meshes pfault wrote (keyed by their options and code version)"}
 
 
 def test_every_option_that_names_a_data_file_is_recorded():
