@@ -30,9 +30,10 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 from pfault.physics.elasticity import tet_geometry  # noqa: E402
+from pfault.post.rundir import read_summary  # noqa: E402
 from pfault.soils.columns import segments  # noqa: E402
 from studies import soil_column as sc  # noqa: E402
-from studies.run import read_summary, run_logged  # noqa: E402
+from studies.run import run_logged  # noqa: E402
 
 SCENES = {"linear": "config/wuxi.opts", "inelastic": "config/wuxi_inelastic.opts",
           "recovery": "config/wuxi_recovery.opts"}
