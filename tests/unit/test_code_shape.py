@@ -13,9 +13,12 @@ included, so a function is measured as a reader meets it.
 from __future__ import annotations
 
 import ast
+import importlib
+import importlib.util
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "pfault"
+REPO = PACKAGE.parent
 MAX_CLASS_LINES = 250
 MAX_CLASS_ATTRIBUTES = 20
 MAX_FUNCTION_LINES = 60
@@ -400,3 +403,24 @@ def test_import_checkers(tmp_path):
     assert graph["pfault.a"] == {"pfault.sub", "pfault.sub.b"} and graph["pfault.c"] == {"pfault", "pfault.a"}
     assert cycles(graph) == [["pfault.a", "pfault.c", "pfault.sub.b"]]
     assert inner_imports(pkg) == ["pfault/a.py:5 .", "pfault/c.py:7 petsc4py"]
+
+
+def names_a_script_imports(path):
+    """(module, name) of every ``from pfault... / studies... import name`` in a script (at any depth)."""
+    tree = ast.parse(path.read_text())
+    return [(n.module, a.name) for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.level == 0
+            and n.module and n.module.split(".")[0] in ("pfault", "studies") for a in n.names]
+
+
+def test_every_script_imports_what_exists():
+    """The benchmarks, studies and test scripts run outside the suite's imports: each name they import from pfault
+    or studies exists (a module moved or a function removed stopped benchmarks/wuxi_inelastic.py at its import)."""
+    missing = []
+    for folder in ("benchmarks", "studies", "tests/scripts"):
+        for path in sorted((REPO / folder).glob("*.py")):
+            for module, name in names_a_script_imports(path):
+                m = importlib.import_module(module)
+                submodule = hasattr(m, "__path__") and importlib.util.find_spec(f"{module}.{name}") is not None
+                if not hasattr(m, name) and not submodule:
+                    missing.append(f"{path.relative_to(REPO)}: from {module} import {name}")
+    assert not missing, missing
