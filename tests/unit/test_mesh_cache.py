@@ -9,6 +9,7 @@ import os
 import numpy as np
 import pytest
 
+from conftest import OEDOMETER, run_scene
 from pfault.mesh import cache
 from pfault.mesh.box import box_mesh
 
@@ -126,3 +127,12 @@ def test_default_directory(monkeypatch, xdg):
     monkeypatch.setenv("XDG_CACHE_HOME", xdg)
     expected = os.path.join(xdg or os.path.expanduser("~/.cache"), "pfault", "meshes")
     assert cache.default_dir() == expected
+
+
+def test_a_scene_without_a_generated_mesh_takes_the_option(tmp_path):
+    """-pfault_mesh_cache names a place on the machine: a box scene (no gmsh mesh to keep) runs with it, nothing is
+    written there."""
+    cache_dir = tmp_path / "meshes"
+    _, summary = run_scene(OEDOMETER, tmp_path / "run", extra=["-pfault_mesh_cache", str(cache_dir)])
+    assert summary["converged"] and summary["max_subsidence_m"] == pytest.approx(0.8333333333333, rel=1e-9)
+    assert not cache_dir.exists()
