@@ -48,6 +48,13 @@ STATE_NAMES = ("stick", "slip", "open")
 MAPS = (("subsidence", "m", "vertical displacement of the land surface, downward positive"),
         ("horizontal_strain", "1", "largest principal horizontal strain of the land surface, tension positive"),
         ("angular_distortion", "1", "slope of the differential subsidence, |grad u_z|"))
+SOIL_MAPS = (("subsidence_inelastic", "m", "inelastic compaction of the column under the land surface, downward "
+              "positive: it stays when the heads recover"),
+             ("subsidence_elastic", "m", "the rest of the subsidence, which comes back when the heads recover"))
+LAYER_MAPS = (("critical_head", "m", "critical (preconsolidation) head of layer {}, relative to the initial heads: the "
+               "mean over the column's length in the layer"),
+              ("head_margin", "m", "further drawdown before layer {} compacts inelastically again"))
+MODE_NAMES = {0: "slip", 1: "open", 2: "break", -1: "never"}
 
 
 @dataclass(frozen=True)
@@ -138,7 +145,24 @@ def surface_maps(run_dir: str, ctx: GisContext, out: str) -> list[str]:
     for name, unit, long in MAPS:
         written.append(write_geotiff(os.path.join(out, f"{name}.tif"), pm.x, pm.y, maps[name][-1], ctx.crs,
                                      _tags(long, unit, times[-1], ctx)))
+    for name, unit, long, at_points in soil_point_maps(run_dir):
+        values = pm.fill(np.einsum("pk,pk->p", pm.lam, at_points[corners]))
+        written.append(write_geotiff(os.path.join(out, f"{name}.tif"), pm.x, pm.y, values, ctx.crs,
+                                     _tags(long, unit, times[-1], ctx)))
     return written
+
+
+def soil_point_maps(run_dir: str) -> list[tuple[str, str, str, np.ndarray]]:
+    """(file name, unit, long name, values at the land surface's points) of surface.h5's last output time for
+    materials that remember: the inelastic and elastic subsidence, and per compressible layer its critical head and
+    head margin ([] without them; pfault.soils.columns)."""
+    with open_h5(os.path.join(run_dir, "surface.h5"), "r") as f:
+        g = f["steps"][sorted(f["steps"])[-1]]
+        data = {k: g[k][...] for k in g if k.startswith(("subsidence_", "critical_head_", "head_margin_"))}
+    maps = [(name, unit, long, data[name]) for name, unit, long in SOIL_MAPS if name in data]
+    layers = sorted(k[len("critical_head_"):] for k in data if k.startswith("critical_head_"))
+    return maps + [(f"{kind}_{layer}", unit, long.format(layer), data[f"{kind}_{layer}"])
+                   for layer in layers for kind, unit, long in LAYER_MAPS]
 
 
 def _tags(long: str, unit: str, t: float, ctx: GisContext) -> dict:
@@ -196,28 +220,27 @@ def _regular(axis: np.ndarray) -> bool:
 
 # -- vector layers ---------------------------------------------------------------------------------------------------
 def trace_layers(run_dir: str, ctx: GisContext) -> list[Layer]:
-    """fault_traces and fissure_traces: the fault faces' edges on the land surface at the last output time."""
+    """fault_faces, fault_traces and fissure_traces: the fault faces (3-D triangles) and their edges on the land
+    surface at the last output time, with their margins to failure."""
     path = os.path.join(run_dir, "fault.h5")
     if not os.path.exists(path):
         return []
     with open_h5(path, "r") as f:
         points, faces = f["mesh/points"][...], f["mesh/cells"][...].astype(np.int64)
         g = f["steps"][sorted(f["steps"])[-1]]
-        data = {k: g[k][...] for k in ("fault", "state", "opening", "slip_magnitude", "broken", "break_time")
-                if k in g}
+        data = {k: g[k][...] for k in ("fault", "state", "opening", "slip_magnitude", "broken", "break_time",
+                                       "margin_drawdown_m", "margin_pore_pressure_pa", "margin_mode") if k in g}
         t = float(g.attrs["time"])
-    n = len(faces)
+    per_face = face_attributes(data, len(faces), ctx, t)
+    site = points + ctx.origin
+    layers = [Layer("fault_faces", "POLYGON", [[tri] for tri in site[faces]], per_face,
+                    "fault faces (3-D triangles, site coordinates) and their margins to failure", dims=3)]
     on = fissures.on_land_surface(run_dir, points)
-    edges, face = fissures.surface_edges(faces, np.ones(n, bool), on)
-    xy = points[edges][:, :, :2] + ctx.origin[:2]
-    fault = data.get("fault", np.zeros(n)).astype(np.int64)[face]
-    names = np.array([ctx.faults[k] if k < len(ctx.faults) else f"fault {k}" for k in fault], dtype=object)
-    state = data.get("state", np.zeros(n)).astype(np.int64)[face]
-    attrs = {"fault": names, "face": face, "state": np.array([STATE_NAMES[s] for s in state], dtype=object),
-             "slip_m": data.get("slip_magnitude", np.zeros(n))[face], "opening_m": data.get("opening", np.zeros(n))[face],
-             "broken": data.get("broken", np.ones(n)).astype(np.int64)[face], "time_s": np.full(len(face), t)}
-    layers = [Layer("fault_traces", "LINESTRING", list(xy), attrs, "fault faces' edges on the land surface")]
-    when = data.get("break_time", np.full(n, np.nan))[face]
+    edges, face = fissures.surface_edges(faces, np.ones(len(faces), bool), on)
+    xy = site[edges][:, :, :2]
+    attrs = {k: np.asarray(v)[face] for k, v in per_face.items()}
+    layers.append(Layer("fault_traces", "LINESTRING", list(xy), attrs, "fault faces' edges on the land surface"))
+    when = data.get("break_time", np.full(len(faces), np.nan))[face]
     formed = np.isfinite(when)
     sub = {k: np.asarray(v)[formed] for k, v in attrs.items() if k not in ("state", "broken")}
     sub["break_time_s"] = when[formed]
@@ -226,6 +249,25 @@ def trace_layers(run_dir: str, ctx: GisContext) -> list[Layer]:
     layers.append(Layer("fissure_traces", "LINESTRING", list(xy[formed]), sub,
                         "edges on the land surface of the fault faces that broke (fissures that reached it)"))
     return layers
+
+
+def face_attributes(data: dict, n: int, ctx: GisContext, t: float) -> dict:
+    """Per fault face of fault.h5's ``data`` at time ``t``: its fault's name, row, state, slip, opening, broken,
+    and its margin to failure: ``margin_drawdown_m`` (m of further drawdown; 0 failed now; NULL where no margin was
+    computed or no further drawdown fails the face), ``margin_pore_pressure_pa`` and ``margin_mode`` (slip, open,
+    break; never: no further drawdown fails it; NULL where no margin was computed)."""
+    fault = data.get("fault", np.zeros(n)).astype(np.int64)
+    names = np.array([ctx.faults[k] if k < len(ctx.faults) else f"fault {k}" for k in fault], dtype=object)
+    state = data.get("state", np.zeros(n)).astype(np.int64)
+    margin = data.get("margin_drawdown_m", np.full(n, np.nan)).astype(float)
+    code = data.get("margin_mode", np.full(n, -1)).astype(np.int64)
+    mode = np.array([MODE_NAMES.get(int(c)) for c in code], dtype=object)
+    mode[np.isnan(margin)] = None
+    return {"fault": names, "face": np.arange(n), "state": np.array([STATE_NAMES[s] for s in state], dtype=object),
+            "slip_m": data.get("slip_magnitude", np.zeros(n)), "opening_m": data.get("opening", np.zeros(n)),
+            "broken": data.get("broken", np.ones(n)).astype(np.int64), "margin_drawdown_m": margin,
+            "margin_pore_pressure_pa": data.get("margin_pore_pressure_pa", np.full(n, np.nan)).astype(float),
+            "margin_mode": mode, "time_s": np.full(n, t)}
 
 
 def _rings(triangles: np.ndarray, xy: np.ndarray) -> list[np.ndarray]:

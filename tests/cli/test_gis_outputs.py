@@ -23,7 +23,9 @@ import pytest
 from conftest import run_scene
 from pfault.errors import InputError
 from pfault.io.insar import read_netcdf
+from pfault.io.geopackage import Layer, write_geopackage
 from pfault.io.insar_grid import locate_product_pixels
+from pfault.post.gis import GisContext, face_attributes
 from pfault.tools.insar_write import write_opera
 
 gdal = pytest.importorskip("osgeo.gdal")
@@ -206,3 +208,121 @@ def test_product_and_scene_crs_must_both_be_given(tmp_path):
     product = write_opera(str(tmp_path / "p.nc"), x, y, CRS.from_epsg(32650), [when], [when], np.zeros((1, 2, 2)))
     with pytest.raises(InputError, match="the product is in WGS 84 / UTM zone 50N but the scene has no -pfault_crs"):
         locate_product_pixels(None, "top", product, (0, 0, 0), None, np.array([0.0, 0.0, 1.0]))
+
+
+# -- soils that remember and margins to failure ---------------------------------------------------------------------
+SOIL = ["-pfault_box_cells", "8,4,5", "-pfault_time_steps", "4", "-pfault_geostatic", "true", "-pfault_water_table",
+        "-2", "-pfault_material_clay_density", "1900", "-pfault_material_sand_density", "2000",
+        "-pfault_material_rock_density", "2400", "-pfault_material_clay_compression_index", "0.3",
+        "-pfault_material_clay_recompression_index", "0.04", "-pfault_material_clay_void_ratio", "0.9",
+        "-pfault_material_clay_head_drawdown", "0:0,10*year:10", "-pfault_crs", "EPSG:32650",
+        "-pfault_mesh_origin", ",".join(f"{v:g}" for v in ORIGIN), "-pfault_map_spacing", "25"]
+
+
+@pytest.fixture(scope="module")
+def soil_run(tmp_path_factory):
+    """The fissure box (its plane a pre-existing fault) with its clay given compression indices (Cc 0.3, Cr 0.04)
+    and drawn down 10 m besides the sand's 20 m, in 4 steps, geostatic start: 1,080 tetrahedra, ~1 s."""
+    tmp = tmp_path_factory.mktemp("gis_soil")
+    with open(SCENE) as fh:
+        text = fh.read()
+    assert "-pfault_material_clay_young_modulus 8*MPa\n" in text
+    (tmp / "soil.opts").write_text(text.replace("-pfault_material_clay_young_modulus 8*MPa\n", ""))
+    _, summary = run_scene(str(tmp / "soil.opts"), tmp / "run", extra=SOIL)
+    assert summary["converged"] and summary["soils"]["clay"]["cells_virgin"] == 216
+    return tmp / "run", summary
+
+
+def p1_at(points, tris, values, x, y):
+    """The P1 interpolant of ``values`` at the land surface's points, at the site points (x, y): barycentric
+    coordinates in the first triangle that holds each."""
+    p = points[tris][:, :, :2]
+    d = np.stack([x, y], axis=1)[:, None, :] - p[None, :, 2, :]                          # (m, t, 2)
+    a = np.stack([p[:, 0] - p[:, 2], p[:, 1] - p[:, 2]], axis=2)                          # (t, 2, 2): columns
+    lam = np.einsum("tij,mtj->mti", np.linalg.inv(a), d)
+    lam = np.concatenate([lam, 1 - lam.sum(axis=2, keepdims=True)], axis=2)
+    inside = (lam >= -1e-12).all(axis=2)
+    assert inside.any(axis=1).all()
+    k = inside.argmax(axis=1)
+    m = np.arange(len(x))
+    return np.einsum("mk,mk->m", lam[m, k], values[tris[k]])
+
+
+def test_soil_geotiffs_are_the_land_surface_point_data(soil_run):
+    """critical_head_clay.tif, head_margin_clay.tif, subsidence_inelastic.tif, subsidence_elastic.tif: the scene's
+    CRS, the grid of subsidence.tif (25 m pixels from the origin), every pixel centre the P1 interpolant of
+    surface.h5's last output time at that site point to 1e-9 relative; inelastic plus elastic is the subsidence."""
+    run, _ = soil_run
+    with h5py.File(run / "surface.h5") as f:
+        pts, tris = f["mesh/points"][...] + np.array(ORIGIN), f["mesh/cells"][...].astype(np.int64)
+        last = f["steps"][sorted(f["steps"])[-1]]
+        data = {k: last[k][...] for k in ("critical_head_clay", "head_margin_clay", "subsidence_inelastic",
+                                          "subsidence_elastic")}
+    reference = gdal.Open(str(run / "gis" / "subsidence.tif"))
+    band = {}
+    for name, at_points in data.items():
+        ds = gdal.Open(str(run / "gis" / f"{name}.tif"))
+        assert epsg_of(ds.GetProjection()) == 32650, name
+        assert ds.GetGeoTransform() == (ORIGIN[0], 25.0, 0.0, ORIGIN[1] + 100.0, 0.0, -25.0), name
+        assert ds.GetGeoTransform() == reference.GetGeoTransform()
+        assert ds.GetRasterBand(1).GetMetadata()["units"] == "m"
+        x, y, a = centres(ds)
+        assert a.shape == (4, 16) and not np.isnan(a).any()
+        gx, gy = np.meshgrid(x, y)
+        expected = p1_at(pts, tris, at_points, gx.ravel(), gy.ravel()).reshape(a.shape)
+        np.testing.assert_allclose(a, expected, rtol=1e-9, atol=0, err_msg=name)
+        band[name] = a
+    # the clay's critical head varies across the land surface (-10.72 .. -9.998 m: 10 m drawn down, compacting)
+    assert band["critical_head_clay"].min() < -10.5 and band["critical_head_clay"].max() > -10.0
+    total = reference.GetRasterBand(1).ReadAsArray()
+    np.testing.assert_allclose(band["subsidence_inelastic"] + band["subsidence_elastic"], total, rtol=1e-12,
+                               atol=1e-15)
+
+
+def test_fault_layers_carry_the_margins_to_failure(soil_run):
+    """fault_faces: every fault face as a 3-D triangle with fault.h5's margin and mode at the last output time;
+    the face with the smallest margin is summary.json's (its margin, mode, row and centroid); fault_traces carry
+    their faces' margins."""
+    run, summary = soil_run
+    m = summary["faults"]["fissure"]["margin"]
+    with h5py.File(run / "fault.h5") as f:
+        last = f["steps"][sorted(f["steps"])[-1]]
+        margin, mode = last["margin_drawdown_m"][...], last["margin_mode"][...]
+    faces = layer(run, "fault_faces")
+    assert len(faces) == len(margin) == 16
+    got = np.array([a["margin_drawdown_m"] for _, a in faces])
+    assert np.array_equal(got, margin) and m["faces_failed"] == 0
+    assert [a["margin_mode"] for _, a in faces] == [{0: "slip", 1: "open", 2: "break"}[c] for c in mode]
+    g, a = faces[int(np.argmin(got))]
+    assert a["margin_drawdown_m"] == pytest.approx(m["min_drawdown_m"], rel=1e-12)
+    assert a["margin_drawdown_m"] == pytest.approx(2.424, rel=1e-3)
+    assert a["face"] == m["min_face"] and a["margin_mode"] == m["min_mode"] == "slip"
+    ring = np.array(g.GetGeometryRef(0).GetPoints())
+    assert ring.shape == (4, 3) and np.abs(ring[:3].mean(axis=0) - m["min_xyz_m"]).max() < 1e-6
+    assert np.abs(ring[:, 0] - (ORIGIN[0] + 375.0)).max() < 1e-6
+    traces = layer(run, "fault_traces")
+    assert len(traces) == 4
+    for _, t in traces:
+        assert t["margin_drawdown_m"] == margin[t["face"]] and t["margin_mode"] == "slip"
+
+
+def test_margins_not_computed_or_never_reached_are_null(tmp_path):
+    """A face no further drawdown fails (inf, mode -1) has a NULL margin and mode ``never``; one whose margin's
+    solve failed (NaN) and a run without margins (no margin fields in fault.h5) NULL margin and mode."""
+    from pyproj import CRS
+    ctx = GisContext(CRS.from_epsg(32650), None, np.zeros(3), None, 2e-4, ["f"])
+    tri = [np.array([[0.0, 0.0, 0.0], [1.0, 0.0, -1.0], [0.0, 1.0, -2.0]])]
+    with_margins = face_attributes({"margin_drawdown_m": np.array([1.5, np.inf, np.nan]),
+                                    "margin_mode": np.array([1, -1, 0])}, 3, ctx, 1.0)
+    without = face_attributes({}, 2, ctx, 1.0)
+    path = write_geopackage(str(tmp_path / "m.gpkg"), ctx.crs,
+                            [Layer("a", "POLYGON", [tri] * 3, with_margins, dims=3),
+                             Layer("b", "POLYGON", [tri] * 2, without, dims=3)])
+    src = ogr.Open(path)
+    got = {name: [f.items() for f in src.GetLayerByName(name)] for name in ("a", "b")}
+    assert [(a["margin_drawdown_m"], a["margin_mode"]) for a in got["a"]] == [(1.5, "open"), (None, "never"),
+                                                                             (None, None)]
+    assert [(a["margin_drawdown_m"], a["margin_mode"]) for a in got["b"]] == [(None, None)] * 2
+    feature = src.GetLayerByName("a").GetFeature(1)         # held: its geometry is a reference into it
+    geom = feature.GetGeometryRef()
+    assert geom.Is3D() and geom.GetGeometryRef(0).GetPoints()[:3] == [tuple(p) for p in tri[0]]
