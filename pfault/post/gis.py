@@ -7,9 +7,12 @@ pfault.post.gis RUN_DIR`` for any run directory written with a CRS:
   multiples of ``-pfault_map_spacing`` in site coordinates (the LOS raster's rule, pfault.io.probes); their every
   output time in ``surface_maps.nc`` (CF NetCDF with its grid mapping: QGIS's temporal controller, xarray); the LOS
   raster's last time, ``insar_los.tif`` and ``insar_los_velocity.tif`` (m, m/s), from ``insar_los.nc`` (whose CRS is
-  the scene's, or the InSAR product's for ``-pfault_insar_grid``);
-- ``pfault.gpkg``, a GeoPackage of vector layers: ``fault_traces`` (each fault face's edge on the land surface, with
-  its fault, state, slip and opening at the last output time), ``fissure_traces`` (those of faces that broke, with
+  the scene's, or the InSAR product's for ``-pfault_insar_grid``); with materials that remember, on the same grid,
+  ``subsidence_inelastic.tif``, ``subsidence_elastic.tif`` and per compressible layer ``critical_head_<layer>.tif``
+  and ``head_margin_<layer>.tif`` (m, relative to the initial heads) from surface.h5's point data;
+- ``pfault.gpkg``, a GeoPackage of vector layers: ``fault_faces`` (each fault face as a 3-D triangle with its fault,
+  state, slip, opening and margin to failure at the last output time), ``fault_traces`` (each fault face's edge on
+  the land surface, with its face's fields), ``fissure_traces`` (those of faces that broke, with
   when), ``hazard_zones`` (the land surface whose horizontal strain exceeds ``-pfault_hazard_strain_threshold`` at the
   last output time: one polygon per edge-connected zone, its area and peak strain) and ``stations`` (each station
   with its last displacement);
