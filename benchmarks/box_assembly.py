@@ -10,6 +10,8 @@ import sys
 import time
 
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
+
 
 args = sys.argv[1:]
 defaults = {"-pfault_box_cells": "55,55,55", "-pfault_solver": "gamg", "-pfault_time_steps": "1",
@@ -17,7 +19,7 @@ defaults = {"-pfault_box_cells": "55,55,55", "-pfault_solver": "gamg", "-pfault_
 for k, v in defaults.items():
     if k not in args:
         args += [k, v]
-petsc4py.init([sys.argv[0], "-options_file", "config/demo.opts"] + args)
+petsc4py.init([sys.argv[0], *petsc_arguments("config/demo.opts", [])] + args)
 from petsc4py import PETSc  # noqa: E402
 
 from pfault.simulation import Simulation  # noqa: E402

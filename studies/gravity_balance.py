@@ -12,8 +12,10 @@ equilibrium.
 import sys
 
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
 
-petsc4py.init([sys.argv[0], "-options_file", sys.argv[1], "-pfault_figures", "false"] + sys.argv[2:])
+
+petsc4py.init([sys.argv[0], *petsc_arguments(sys.argv[1], []), "-pfault_figures", "false"] + sys.argv[2:])
 import numpy as np  # noqa: E402
 
 from pfault.physics import elasticity as el  # noqa: E402

@@ -159,7 +159,8 @@ def test_stop_signal_before_the_time_loop_is_one_line(tmp_path, sig):
     run_dir = tmp_path / "run"
     proc = subprocess.Popen(command(["-m", "pfault", OEDOMETER, "-pfault_box_cells", "30,30,30",
                                      "-pfault_output_dir", str(run_dir)], 1),
-                            cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=default_sigint)
     wait_for_handler(proc.pid, signal.SIGUSR1)      # pfault's own handlers are in place (however busy the machine)
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=TIMEOUT)
@@ -168,6 +169,12 @@ def test_stop_signal_before_the_time_loop_is_one_line(tmp_path, sig):
     assert err.splitlines() == [f"pfault: stopped: {sig.name} outside the time loop (start-up, meshing, setup, or the "
                                 "figures at the end): the run stopped at once; every step it completed is on disk"]
     assert not run_dir.exists() and not [f for f in os.listdir(tmp_path) if ".pfault-" in f]
+
+
+def default_sigint():
+    """In the child before it starts: SIGINT as a terminal gives it. A process started with SIGINT ignored (a job in the
+    background of a shell without job control, as under nohup) keeps it ignored, as Python and pfault rightly do."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def wait_for_handler(pid, sig, timeout=TIMEOUT):

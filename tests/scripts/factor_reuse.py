@@ -15,9 +15,11 @@ import os
 import sys
 
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
+
 
 SCENE = "config/wuxi.opts"
-petsc4py.init([sys.argv[0], "-options_file", SCENE, "-pfault_mesh_size_factor", "3"] + sys.argv[1:])
+petsc4py.init([sys.argv[0], *petsc_arguments(SCENE, []), "-pfault_mesh_size_factor", "3"] + sys.argv[1:])
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402
 

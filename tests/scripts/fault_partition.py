@@ -14,12 +14,14 @@ import sys
 
 import numpy as np
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
+
 
 SCENE = "config/two_blocks.opts"
 if sys.argv[1:2] == ["--scene"]:
     SCENE = sys.argv[2]
     del sys.argv[1:3]
-petsc4py.init([sys.argv[0], "-options_file", SCENE] + sys.argv[1:])
+petsc4py.init([sys.argv[0], *petsc_arguments(SCENE, [])] + sys.argv[1:])
 from petsc4py import PETSc  # noqa: E402
 
 from pfault.simulation import Simulation  # noqa: E402

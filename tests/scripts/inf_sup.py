@@ -14,8 +14,10 @@ import json
 import sys
 
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
 
-petsc4py.init([sys.argv[0], "-options_file", "config/two_blocks.opts", "-pfault_output_dir", "/tmp/pfault-infsup",
+
+petsc4py.init([sys.argv[0], *petsc_arguments("config/two_blocks.opts", []), "-pfault_output_dir", "/tmp/pfault-infsup",
                "-pfault_bc_xmax_displacement", "0,0,0.2", "-pfault_bc_xmax_components", "x,z"] + sys.argv[1:])
 import numpy as np  # noqa: E402
 from petsc4py import PETSc  # noqa: E402

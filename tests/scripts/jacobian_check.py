@@ -24,6 +24,8 @@ from dataclasses import replace
 import sys
 
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
+
 
 SCENE = "config/two_blocks.opts"
 # --junction: the Lagrange cases on two faults crossing (an X junction: 4 pieces at each junction vertex, the
@@ -33,7 +35,7 @@ if JUNCTION:
     sys.argv.remove("--junction")
     SCENE = "config/hard/two_faults.opts"
     sys.argv += ["-pfault_box_fault_planes", "fa:x:175:0:200:-40:0,fb:y:175:0:200:-40:0"]
-petsc4py.init([sys.argv[0], "-options_file", SCENE] + sys.argv[1:])
+petsc4py.init([sys.argv[0], *petsc_arguments(SCENE, [])] + sys.argv[1:])
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402

@@ -15,10 +15,12 @@ import tempfile
 
 import numpy as np
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
+
 
 scene = sys.argv[1]
 out_dir = tempfile.mkdtemp(prefix="mesh_digest_")
-petsc4py.init([sys.argv[0], "-options_file", scene, "-pfault_output_dir", out_dir, *sys.argv[2:]])
+petsc4py.init([sys.argv[0], *petsc_arguments(scene, []), "-pfault_output_dir", out_dir, *sys.argv[2:]])
 from petsc4py import PETSc  # noqa: E402
 
 from pfault.model import build_model  # noqa: E402

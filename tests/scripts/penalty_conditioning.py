@@ -15,6 +15,8 @@ import json
 import sys
 
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
+
 
 SCENE = "config/two_blocks.opts"
 argv = sys.argv[1:]
@@ -27,7 +29,7 @@ if "-k" in argv:
     i = argv.index("-k")
     ks = [float(v) for v in argv[i + 1].split(",")]
     del argv[i:i + 2]
-petsc4py.init([sys.argv[0], "-options_file", SCENE] + argv)
+petsc4py.init([sys.argv[0], *petsc_arguments(SCENE, [])] + argv)
 import numpy as np  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 from petsc4py import PETSc  # noqa: E402

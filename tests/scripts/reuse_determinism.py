@@ -13,9 +13,11 @@ import sys
 import time
 
 import petsc4py
+from pfault.optionsfile import petsc_arguments  # noqa: E402
+
 
 SCENE = "config/wuxi.opts"
-petsc4py.init([sys.argv[0], "-options_file", SCENE, "-pfault_mesh_size_factor", "3", "-pfault_solver", "mumps",
+petsc4py.init([sys.argv[0], *petsc_arguments(SCENE, []), "-pfault_mesh_size_factor", "3", "-pfault_solver", "mumps",
                "-pfault_figures", "false"] + sys.argv[1:])
 import h5py  # noqa: E402
 import numpy as np  # noqa: E402
