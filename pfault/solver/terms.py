@@ -170,8 +170,13 @@ class TermDefaults:
         """None: its cells take the geostatic start's vertical stress."""
         return np.zeros(0, np.int64), np.zeros(0)
 
-    def settle(self, x_loc: np.ndarray, load: Any, history: Any, t: float) -> tuple[Any, int]:
+    def settle(self, x_loc: np.ndarray, load: Any, history: Any, t: float, error: float = 0.0
+               ) -> tuple[Any, int]:
         return history, 0
+
+    def settle_change(self, dx_loc: np.ndarray) -> float:
+        """0: ``settle`` reads nothing of the iterate."""
+        return 0.0
 
     def cell_strain(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(0, np.int64), np.zeros((0, 3, 3))
