@@ -36,7 +36,7 @@ from .margins import read_margin_settings
 from .mesh.fault import split_faults
 from .georef import read_georef
 from .sources.heads import build_heads_source, check_heads_files, read_heads_settings, read_mesh_origin
-from .soils.cells import check_krylov, land_top, with_reference
+from .soils.cells import bubble_moduli, check_krylov, land_top, with_reference
 from .soils.overburden import initial_effective_stress
 from .soils.term import SoilTerm
 
@@ -270,17 +270,20 @@ def _apply_solver(scene: Scene, mesh: Any, options_file: str) -> str | None:
     return apply_solver_file(name, options_file)
 
 
-def fault_terms(scene: Scene, mesh: Any, dofmap: Any, assembler: Any, cell_props: Any, topology: Any) -> tuple:
+def fault_terms(scene: Scene, mesh: Any, dofmap: Any, assembler: Any, cell_props: Any, topology: Any,
+                soil: Any = None) -> tuple:
     """The terms the scene's faults give the equations: one fault interface for all of them (pfault.faults.term),
-    none without faults."""
+    none without faults. ``soil``: the cells of the materials with memory (pfault.soils.cells.SoilCells), whose
+    face bubbles take the law's virgin tangent (pfault.soils.cells.bubble_moduli), or None."""
     if not scene.effects.faults:
         return ()
     with logged("pfaultFaultSetup"):
         fixed, lgmap = constrained_local(mesh, dofmap), mesh.dm.getLGMap()
         faces = FaultFaces(mesh, dofmap, scene.fault_settings, topology.fault_id, cell_props.young_modulus, fixed,
                            lgmap)
+        lam, mu = (assembler.lam, assembler.mu) if soil is None else bubble_moduli(soil, assembler.lam, assembler.mu)
         bubbles = CellBubbles(faces.sides.cell, faces.sides.lface, dofmap.cell_dofs, fixed,
-                              (assembler.grad, assembler.vol, assembler.lam, assembler.mu), faces.area,
+                              (assembler.grad, assembler.vol, lam, mu), faces.area,
                               faces.R, lgmap.apply, PETSc.IntType)
         face_z = mesh.coords[faces.verts][:, :, 2].mean(axis=1)
         pressure = face_pressure(scene.contact, scene.settings, face_z, faces.cell, assembler.alpha)
@@ -363,7 +366,7 @@ def build_model(comm: Any, reader: Any, options_file: str) -> Model:
     try:
         assembler = ElasticAssembler(mesh, dofmap, cell_props, None if soil is None else soil.elastic(len(mesh.cells)))
         source = _source(scene, mesh, cell_props, serial_values)
-        terms = fault_terms(scene, mesh, dofmap, assembler, cell_props, topology)
+        terms = fault_terms(scene, mesh, dofmap, assembler, cell_props, topology, soil)
         terms += soil_terms(soil, mesh, dofmap, assembler, overburden)
         equations = Equations(mesh, dofmap, assembler, scene.boundaries, source, scene.settings, terms)
     except BaseException:

@@ -26,6 +26,7 @@ from math import factorial
 import numpy as np
 
 from ..mesh.serial import TET_FACES
+from ..physics import elasticity as el
 
 MEAN = 9.0 / 20.0          # mean of 27 l_i l_j l_k over its face
 VOLUME_MEAN = 9.0 / 40.0   # its mean over the cell
@@ -186,10 +187,10 @@ class CellBubbles:
     dof numbering (pure NumPy; the interface turns it into PETSc insertions).
 
     ``side_cell``, ``side_lface`` (nf, 2): the minus and plus cells of each owned face (local ids) and the face's
-    local face in each; ``cell_dofs`` (nc, 12) local
-    dofs; ``fixed`` a mask of the local dofs held by Dirichlet conditions (they take no force);
-    ``cells`` (grad, vol, lam, mu) of all local cells; ``area``, ``R`` of the faces; ``to_global`` maps local dofs
-    to global ones (taking integers of the type ``index_type``)."""
+    local face in each; ``cell_dofs`` (nc, 12) local dofs; ``fixed`` a mask of the local dofs held by Dirichlet
+    conditions (they take no force); ``cells`` (grad, vol, lam, mu) of all local cells (lam, mu: the bubbles'
+    moduli); ``area``, ``R`` of the faces; ``to_global`` maps local dofs to global ones (taking integers of the
+    type ``index_type``)."""
 
     def __init__(self, side_cell: np.ndarray, side_lface: np.ndarray, cell_dofs: np.ndarray,
                  fixed: np.ndarray, cells: tuple, area: np.ndarray, R: np.ndarray, to_global: Callable,
@@ -218,6 +219,7 @@ class CellBubbles:
         self.free = ~fixed[self.dofs]
         self.nf = len(area)
         self._grad, self._vol = grad[c], vol[c]
+        self.lam, self.mu = lam[c], mu[c]               # the bubbles' moduli in the enriched cells
         self._to_global, self._int = to_global, index_type
 
     @property
@@ -291,6 +293,11 @@ class CellBubbles:
         (``bubble_dofs``): sym(sum_s b_s (x) int grad(phi_s) dV) / V. The stress is linear in it, so the cell
         mean of the stress of P1 plus bubbles is C:(eps(u) + this)."""
         return mean_strain(self._grad, self._vol, self.lface, self.bubble_dofs(u_loc, dt, load))
+
+    def cell_stress(self, u_loc: np.ndarray, dt: np.ndarray, load: BubbleLoad) -> np.ndarray:
+        """The stress of the bubbles' mean strain (``cell_strain``) in their moduli (ne, 3, 3): what they add to each
+        enriched cell's mean stress."""
+        return el.stress(self.cell_strain(u_loc, dt, load), self.lam, self.mu)
 
     # -- Jacobian ----------------------------------------------------------------------------------
     def jacobian_blocks(self, drdg: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:

@@ -266,12 +266,13 @@ class FaultTerm(fm.MarginHooks, TermDefaults):
             _, _, dg, dt = self.law_terms(x_loc, load, history, state)
             self.blocks.add(J, dg, dt)
 
-    def cell_strain(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory
-                    ) -> tuple[np.ndarray, np.ndarray]:
-        """The local cells beside the faces and the strain of their bubbles averaged over each (pfault.faults.
-        bubbles.CellBubbles.cell_strain), recovered from the state x_loc under ``load``."""
+    def added_stress(self, x_loc: np.ndarray, load: FaultLoad, history: FaultHistory
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The local cells beside the faces and the stress their bubbles add to each (the bubbles' strain averaged
+        over the cell in the bubbles' moduli, pfault.faults.bubbles.CellBubbles.cell_stress), recovered from the
+        state x_loc under ``load``."""
         dt = self.tractions(x_loc) - history.t0
-        return self.bubbles.cell, self.bubbles.cell_strain(x_loc, dt, load.bubbles)
+        return self.bubbles.cell, self.bubbles.cell_stress(x_loc, dt, load.bubbles)
 
     # -- what is reported ----------------------------------------------------------------------------
     def measures(self, x_loc: np.ndarray, x_rel: np.ndarray, load: FaultLoad, history: FaultHistory,

@@ -2,11 +2,12 @@
 
 A material given compression indices (or CSUB's skeletal storages) has no drained modulus. Its cells take their
 effective stress from the law (pfault.soils.term), which needs the initial stress; before it, the geostatic gravity
-solve, the face bubbles of a fault beside them and a flow model's default storage need an elastic modulus: the
-law's own swelling-line modulus at an estimate of the initial stress (``reference_young``), the overburden of the
-cell's depth below the land surface's highest point, buoyant below the water table. In flat layers the gravity
-solve's vertical stress does not depend on the moduli; where it does (arching around a stiff body) only their
-ratios matter, which the estimate gets from the law.
+solve and a flow model's default storage need an elastic modulus: the law's own swelling-line modulus at an
+estimate of the initial stress (``reference_young``), the overburden of the cell's depth below the land surface's
+highest point, buoyant below the water table; the face bubbles of a fault beside them take the law's virgin
+tangent at that stress (``bubble_moduli``). In flat layers the gravity solve's vertical stress does not depend on
+the moduli; where it does (arching around a stiff body) only their ratios matter, which the estimate gets from the
+law.
 """
 
 from __future__ import annotations
@@ -104,6 +105,27 @@ def reference_young(cells: SoilCells, density: np.ndarray, z: np.ndarray, z_top:
     k0 = np.full(len(c), settings.k0) if settings.k0 >= 0 else nu / (1 - nu)
     bulk = np.where(law.index_form, sv * (1 + 2 * k0) / 3, 1.0) / law.kappa
     return 3 * bulk * (1 - 2 * nu)
+
+
+def bubble_moduli(cells: SoilCells, lam: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Lame parameters of a fault's face bubbles (pfault.faults.bubbles) in every local cell: the cell's own
+    (``lam``, ``mu``), except in the cells of the materials with memory, which take the law's tangent on its virgin
+    line at their reference stress: the bulk modulus of the reference (``reference_young``, the swelling line's)
+    times kappa/lambda (Cr/Cc or Sske/Sskv), its shear modulus unchanged (the law's shear modulus is the swelling
+    line's on both branches).
+
+    Condensing a cell's bubbles takes K_ub K_bb^-1 K_bu off its P1 stiffness: all an elastic cell of the bubbles'
+    modulus can give (a Schur complement of the cell with its bubbles, which is positive). A cell with memory takes
+    its P1 stiffness from the law's tangent, whose bulk modulus on the virgin line is Cc/Cr times its swelling
+    line's: with bubbles at the swelling line's bulk modulus the condensation took off more than such a cell holds
+    once it compacted (docs/theory.md, "Soils that remember": the faulted aquifer's sand cells beside the fault
+    indefinite, a near-null mode of the Jacobian on the faces' multipliers, Newton stalled). A cell unloaded to
+    its swelling line is stiffer in bulk than its bubbles, which then take off less than it holds."""
+    c = cells.cells
+    lam, mu = np.array(lam, dtype=float, copy=True), np.array(mu, dtype=float, copy=True)
+    bulk = (lam[c] + 2.0 / 3.0 * mu[c]) * (cells.law.kappa / cells.law.lam)
+    lam[c] = bulk - 2.0 / 3.0 * mu[c]
+    return lam, mu
 
 
 def check_krylov(soil_names: tuple, ksp_type: str) -> None:

@@ -15,7 +15,6 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ..physics import elasticity as el
 from ..physics import geostatic as gs
 from .loads import Loads
 from .setup import rigid_body_modes
@@ -202,23 +201,23 @@ class Equations:
 
     def effective_stress(self, u_local: np.ndarray, histories: tuple, loads: tuple | None = None) -> np.ndarray:
         """Incremental effective stress per cell (nc, 3, 3), its mean over the cell: C:eps of the P1 displacements
-        of ``u_local``, or the law's in the cells a term gives their stress (a material with memory), and of the
-        strain the terms add (a fault's face bubbles in the cells beside it, recovered from u_local's multipliers)
-        under the terms' ``loads``, by default those last set."""
+        of ``u_local``, or the law's in the cells a term gives their stress (a material with memory), plus the
+        stress the terms add (a fault's face bubbles in the cells beside it, recovered from u_local's multipliers,
+        in the bubbles' moduli) under the terms' ``loads``, by default those last set."""
         sig = self.asm.effective_stress(u_local)
         loads = self.loads.term_loads if loads is None else loads
         for term, load, h in zip(self.terms, loads, histories):
             cells, stress = term.cell_stress(u_local, load, h)
             sig[cells] = stress
         for term, load, h in zip(self.terms, loads, histories):
-            cells, eps = term.cell_strain(u_local, load, h)
-            sig[cells] += el.stress(eps, self.asm.lam[cells], self.asm.mu[cells])
+            cells, added = term.added_stress(u_local, load, h)
+            sig[cells] += added
         return sig
 
     def cell_total_stress(self, u_local: np.ndarray, dp: np.ndarray, sigma0: np.ndarray | None,
                           histories: tuple, loads: tuple | None = None) -> np.ndarray:
         """Total stress per cell: initial + C:eps(u) - alpha dp I (dp per cell, Pa; ``Loads.cell_dp``), with the
-        terms' strain (``effective_stress``)."""
+        terms' added stress (``effective_stress``)."""
         sig = self.effective_stress(u_local, histories, loads)
         if sigma0 is not None:
             sig = sig + sigma0

@@ -37,9 +37,9 @@ The protocol (methods a term has; collective where it says so):
   ``add_jacobian(x_loc, load, history, J, configuration=None)`` its blocks to J;
   ``add_initial_operator(A, n_local)`` its blocks of the initial gravity state's linear operator, returning their
   configuration.
-- Stress: ``cell_strain(x_loc, load, history)`` (cells, strain) it adds to the cells' mean strain (a fault's face
-  bubbles); ``cell_stress(x_loc, load, history)`` (cells, effective stress change) it gives its cells instead of the
-  elastic one (a material with memory).
+- Stress: ``added_stress(x_loc, load, history)`` (cells, stress) it adds to the cells' mean effective stress (a
+  fault's face bubbles: their mean strain in their moduli); ``cell_stress(x_loc, load, history)`` (cells,
+  effective stress change) it gives its cells instead of the elastic one (a material with memory).
 - What is reported: ``measures(x_loc, x_rel, load, history, mesh)`` the step record's figures (JSON-ready,
   collective); ``fields(x_total, x_rel, load, history)`` the output series' fields ({"fault": per owned face,
   "cells": per local cell}); ``columns(xy, mesh)`` what it measures along vertical columns under the points xy (the
@@ -125,7 +125,7 @@ class Term(Protocol):
 
     def counts(self, configuration: np.ndarray) -> dict: ...
 
-    def cell_strain(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]: ...
+    def added_stress(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]: ...
 
     def cell_stress(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]: ...
 
@@ -177,7 +177,7 @@ class TermDefaults:
         """0: ``settle`` reads nothing of the iterate (the same on every rank, no communication)."""
         return 0.0
 
-    def cell_strain(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]:
+    def added_stress(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(0, np.int64), np.zeros((0, 3, 3))
 
     def cell_stress(self, x_loc: np.ndarray, load: Any, history: Any) -> tuple[np.ndarray, np.ndarray]:
