@@ -272,8 +272,8 @@ def test_soil_geotiffs_are_the_land_surface_point_data(soil_run):
         expected = p1_at(pts, tris, at_points, gx.ravel(), gy.ravel()).reshape(a.shape)
         np.testing.assert_allclose(a, expected, rtol=1e-9, atol=0, err_msg=name)
         band[name] = a
-    # the clay's critical head varies across the land surface (-10.72 .. -9.998 m: 10 m drawn down, compacting)
-    assert band["critical_head_clay"].min() < -10.5 and band["critical_head_clay"].max() > -10.0
+    # the clay's critical head varies across the land surface (-10.25 .. -9.69 m: 10 m drawn down, compacting)
+    assert band["critical_head_clay"].min() < -10.2 and band["critical_head_clay"].max() > -9.8
     total = reference.GetRasterBand(1).ReadAsArray()
     np.testing.assert_allclose(band["subsidence_inelastic"] + band["subsidence_elastic"], total, rtol=1e-12,
                                atol=1e-15)
@@ -291,11 +291,12 @@ def test_fault_layers_carry_the_margins_to_failure(soil_run):
     faces = layer(run, "fault_faces")
     assert len(faces) == len(margin) == 16
     got = np.array([a["margin_drawdown_m"] for _, a in faces])
-    assert np.array_equal(got, margin) and m["faces_failed"] == 0
+    failed = got == 0.0                                     # faces slipping now: no further drawdown needed
+    assert np.array_equal(got, margin) and m["faces_failed"] == failed.sum() == 2
     assert [a["margin_mode"] for _, a in faces] == [{0: "slip", 1: "open", 2: "break"}[c] for c in mode]
-    g, a = faces[int(np.argmin(got))]
+    g, a = faces[int(np.argmin(np.where(failed, np.inf, got)))]   # summary.json's smallest: of the faces not failed
     assert a["margin_drawdown_m"] == pytest.approx(m["min_drawdown_m"], rel=1e-12)
-    assert a["margin_drawdown_m"] == pytest.approx(2.424, rel=1e-3)
+    assert a["margin_drawdown_m"] == pytest.approx(1.614, rel=1e-3)
     assert a["face"] == m["min_face"] and a["margin_mode"] == m["min_mode"] == "slip"
     ring = np.array(g.GetGeometryRef(0).GetPoints())
     assert ring.shape == (4, 3) and np.abs(ring[:3].mean(axis=0) - m["min_xyz_m"]).max() < 1e-6
