@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import dataclass, replace
+from typing import Any
 
 import h5py
 import numpy as np
@@ -336,3 +337,15 @@ def _unit_seconds(units, path: str) -> float | None:
     except InputError:
         raise InputError(f"-pfault_heads_file {path}: time units '{units}' are not a time unit pfault knows "
                          "(s, minute, hour, day, year); fix the attribute 'units' of 'time'") from None
+
+
+def set_seconds(heads: Any, settings: Any) -> None:
+    """``heads.seconds``: the saved times in seconds, in the file's own unit of 'time' where it gives one, else in
+    -pfault_heads_time_unit (``settings``: the heads settings); the option contradicting the file's unit is an error
+    (the file closed first)."""
+    unit = heads.time_unit if heads.time_unit is not None else settings.time_unit
+    if heads.time_unit is not None and settings.time_unit_given and abs(unit - settings.time_unit) > 1e-12 * unit:
+        heads.close()
+        raise InputError(f"-pfault_heads_time_unit contradicts the units of 'time' in {settings.file}; remove the "
+                         "option (the file's units are used)")
+    heads.seconds = heads.times * unit

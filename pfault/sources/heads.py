@@ -113,12 +113,7 @@ def open_heads(settings: HeadsSettings) -> tuple[Any, Any]:
         heads.seconds = heads.times * settings.time_unit
         return heads, grid
     heads = head_files.TableHeads(settings.file)
-    unit = heads.time_unit if heads.time_unit is not None else settings.time_unit
-    if heads.time_unit is not None and settings.time_unit_given and abs(unit - settings.time_unit) > 1e-12 * unit:
-        heads.close()
-        raise InputError(f"-pfault_heads_time_unit contradicts the units of 'time' in {settings.file}; "
-                         "remove the option (the file's units are used)")
-    heads.seconds = heads.times * unit
+    head_files.set_seconds(heads, settings)
     return heads, None
 
 

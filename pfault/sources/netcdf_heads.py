@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..georef import Transform, crs_from_cf, same_crs
-from .head_files import Mf6Grid, _unit_seconds, read_mf6_grid, scaled
+from .head_files import Mf6Grid, _unit_seconds, read_mf6_grid, scaled, set_seconds
 
 FT = 0.3048
 LAYOUT = "MODFLOW 6's NetCDF output (NETCDF_STRUCTURED or NETCDF_MESH2D in the output control)"
@@ -74,6 +74,8 @@ class Mf6NetcdfHeads:
         self.time_unit = _unit_seconds(units, path) if units is not None else None
         if len(self.times) == 0 or not np.all(np.isfinite(self.times)) or np.any(np.diff(self.times) <= 0):
             self._bad("its saved times are empty, not finite or not increasing; give the file of one model run")
+        self.head: Any = None           # structured: the (time, z, y, x) variable; a layered mesh: self.layers
+        self.layers: list = []
         if "STRUCTURED" in self.kind and "MESH" not in self.kind:
             self._structured(grb)
         elif "MESH" in self.kind:
@@ -194,7 +196,7 @@ class Mf6NetcdfHeads:
         return {"m": 1.0, "meters": 1.0, "metres": 1.0, "ft": FT, "feet": FT}.get(unit)
 
     def values(self, i: int) -> np.ndarray:
-        if hasattr(self, "head"):
+        if self.head is not None:
             a = self._oriented(np.asarray(self.head[i], float))
         else:
             a = np.stack([np.asarray(v[i], float) for v in self.layers])
@@ -266,12 +268,7 @@ def open_mf6_netcdf(settings: Any) -> tuple[Mf6NetcdfHeads, Any]:
     of the file (an -pfault_heads_time_unit that contradicts it is an error), its length unit, its CRS."""
     grb = read_mf6_grid(settings.grid) if settings.grid else None
     heads = Mf6NetcdfHeads(settings.file, grb)
-    unit = heads.time_unit if heads.time_unit is not None else settings.time_unit
-    if heads.time_unit is not None and settings.time_unit_given and abs(unit - settings.time_unit) > 1e-12 * unit:
-        heads.close()
-        raise InputError(f"-pfault_heads_time_unit contradicts the units of 'time' in {settings.file}; remove the "
-                         "option (the file's units are used)")
-    heads.seconds = heads.times * unit
+    set_seconds(heads, settings)
     length = heads.length_unit or settings.length_unit
     if heads.length_unit and settings.length_unit != 1.0 and abs(settings.length_unit - length) > 1e-12:
         heads.close()
