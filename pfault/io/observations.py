@@ -100,48 +100,57 @@ class Observations:
         return out
 
 
-class StationObserver(Observer):
+class ProbeObserver(Observer):
+    """An observer of the time loop that writes a series of the displacement at points (``probe``) on rank 0
+    (``series``: its ``start`` opens the files, or continues those of the run a restart continues)."""
+
+    def __init__(self, output: Any, located: Located) -> None:
+        m = output.model
+        self.output, self.comm = output, m.comm
+        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
+        self.series: Any = None
+        self.started = False
+
+    def start_once(self) -> None:
+        """The series' files opened at the first call (rank 0; collective)."""
+        if not self.started:
+            out = self.output
+            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
+            self.started = True
+
+
+class StationObserver(ProbeObserver):
     """Observer of the time loop (pfault.run): the stations' displacement at time 0 (or the rows of the run a
     restart continues) and after every converged step."""
 
     def __init__(self, output: Any, stations: Stations | None, located: Located) -> None:
-        m = output.model
-        self.output, self.comm = output, m.comm
-        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
-        self.series = StationSeries(stations, located.side) if m.comm.rank == 0 else None
-        self.started = False
+        super().__init__(output, located)
+        self.series = StationSeries(stations, located.side) if self.comm.rank == 0 else None
 
     def step_done(self, result: Any) -> None:
         out = self.output
-        if not self.started:
-            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
-            self.started = True
+        self.start_once()
         if not result.record.converged:
             return
         u = self.probe.values(result.u_rel)
         run_on_root(self.comm, lambda: self.series.append(out.writer.dir, result.step, result.t, u))
 
 
-class InsarObserver(Observer):
+class InsarObserver(ProbeObserver):
     """Observer of the time loop (pfault.run): the LOS raster at time 0 (or the times of the run a restart
     continues) and at every output time of a converged step."""
 
     def __init__(self, output: Any, raster: Raster | None, located: Located, los: np.ndarray,
                  crs: Any = None) -> None:
-        m = output.model
-        self.output, self.comm = output, m.comm
-        self.probe = PointProbe(m.comm, m.mesh, m.dofmap, located)
-        georef = m.scene.georef
+        super().__init__(output, located)
+        georef = output.model.scene.georef
         crs = crs if crs is not None else (georef.crs if georef is not None else None)
         start = georef.start if georef is not None else None
-        self.series = InsarSeries(raster, los, crs, start) if m.comm.rank == 0 else None
-        self.started = False
+        self.series = InsarSeries(raster, los, crs, start) if self.comm.rank == 0 else None
 
     def step_done(self, result: Any) -> None:
         out = self.output
-        if not self.started:
-            run_on_root(self.comm, lambda: self.series.start(out.writer.dir, out.restart_dir, out.restart_step))
-            self.started = True
+        self.start_once()
         if not (result.output and result.record.converged):
             return
         u = self.probe.values(result.u_rel)
