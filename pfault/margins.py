@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from .errors import InputError
 from .records import SolveCost, merge_json
@@ -52,6 +53,7 @@ class MarginStep:
         c = self.cost
         out: dict = {"margin_solve": {"solved": bool(self.solved), "converged": bool(self.converged),
                                       "ksp_its": int(c.ksp_its), "factorizations": int(c.factorizations),
+                                      "jacobians": int(c.jacobians), "pc_setups": int(c.pc_setups),
                                       "wall_s": float(c.wall_s)}}
         for part in self.terms:
             if part is not None:
@@ -83,6 +85,16 @@ class Margins:
         loaded = source.loaded_cells(t) if source.active else np.zeros(len(self.model.mesh.cells), dtype=bool)
         if not self.model.comm.tompi4py().allreduce(bool(np.any(loaded)), op=MPI.LOR):
             return None
+        stage = PETSc.Log.Stage("Margins")
+        stage.push()
+        try:
+            return self._measure(state, t, loaded)
+        finally:
+            stage.pop()
+
+    def _measure(self, state: Any, t: float, loaded: np.ndarray) -> MarginStep:
+        """``measure`` on the cells ``loaded`` (under -log_view, stage Margins)."""
+        eq = self.model.equations
         x_loc = eq.local_array(state.u)
         live = sum(term.margin_parts(x_loc, load, h) for term, load, h in zip(eq.terms, eq.loads.term_loads,
                                                                               state.histories))

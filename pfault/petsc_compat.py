@@ -1,4 +1,4 @@
-"""The two PETSc calls pfault needs that petsc4py 3.18 (Debian 12) does not bind, reached through ctypes here and
+"""The PETSc calls pfault needs that petsc4py 3.18 (Debian 12) does not bind, reached through ctypes here and
 nowhere else. Each is used through petsc4py when the installed version has it.
 
 - ``PetscOptionsLeftGet``: the options no PETSc object has read, which ``-options_left`` prints at the end of a
@@ -8,6 +8,9 @@ nowhere else. Each is used through petsc4py when the installed version has it.
   (``pfault.solver.policy.FactorReuse``; petsc4py binds it from 3.19 on).
 - ``SNESConvergedDefault``: SNES's own convergence test, which a convergence test written in Python extends
   (``pfault.solver.policy.Settling``; petsc4py has no binding in any version).
+- ``PCGetReusePreconditioner``: whether a PC keeps its preconditioner when its operator changes, which the margins'
+  solve sets for itself and gives back (``pfault.solver.policy.StepSolver.solve_response``; petsc4py binds it from
+  3.22 on).
 """
 
 from __future__ import annotations
@@ -57,6 +60,19 @@ def set_lag_preconditioner(snes: Any, lag: int) -> None:
     err = lib.SNESSetLagPreconditioner(ctypes.c_void_p(snes.handle), lag)
     if err:
         raise RuntimeError(f"SNESSetLagPreconditioner returned {err}")
+
+
+def reuse_preconditioner(pc: Any) -> bool:
+    """PCGetReusePreconditioner(pc): whether ``pc`` keeps its preconditioner when its operator changes."""
+    if hasattr(pc, "getReusePreconditioner"):
+        return bool(pc.getReusePreconditioner())
+    lib = _library()
+    flag = ctypes.c_int(0)      # PetscBool is a C enum
+    lib.PCGetReusePreconditioner.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)]
+    err = lib.PCGetReusePreconditioner(ctypes.c_void_p(pc.handle), ctypes.byref(flag))
+    if err:
+        raise RuntimeError(f"PCGetReusePreconditioner returned {err}")
+    return bool(flag.value)
 
 
 def converged_default(PETSc: Any, snes: Any, its: int, xnorm: float, ynorm: float, fnorm: float) -> int:

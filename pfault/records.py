@@ -25,7 +25,7 @@ def counts_text(counts: dict) -> str:
 
 @dataclass(frozen=True)
 class SolveCost:
-    """Iterations, wall time, numeric factorisations and Jacobians of one solve or of several (``+``), and their
+    """Iterations, wall time, numeric factorisations, Jacobians and preconditioner set-ups of one solve or of several (``+``), and their
     residual histories in order (nonlinear solves)."""
     newton_its: int = 0
     ksp_its: int = 0
@@ -33,11 +33,13 @@ class SolveCost:
     factorizations: int = 0
     jacobians: int = 0
     residual_history: tuple = ()
+    pc_setups: int = 0          # preconditioner set-ups (PETSc's PCSetUp events, nested ones too; 0 unless logging)
 
     def __add__(self, other: SolveCost) -> SolveCost:
         return SolveCost(self.newton_its + other.newton_its, self.ksp_its + other.ksp_its,
                          self.wall_s + other.wall_s, self.factorizations + other.factorizations,
-                         self.jacobians + other.jacobians, self.residual_history + other.residual_history)
+                         self.jacobians + other.jacobians, self.residual_history + other.residual_history,
+                         self.pc_setups + other.pc_setups)
 
     @property
     def ksp_per_newton(self) -> float:

@@ -65,6 +65,7 @@ class Equations:
             self.J.setNearNullSpace(self.nullspace)
         self.n_jacobians = 0            # Jacobians of the terms assembled (a configuration seen before is kept)
         self._jacobian_key: np.ndarray | None = None    # the terms' configuration of J while it depends on nothing else
+        self.jacobian_configuration: np.ndarray | None = None  # the terms' configuration J was last assembled in
 
     @property
     def linear(self) -> bool:
@@ -196,7 +197,8 @@ class Equations:
         A.assemble()
         # a first step that starts in this configuration keeps this factorisation
         varies = any(term.jacobian_varies(c) for term, c in zip(self.terms, config))
-        self._jacobian_key = None if varies else _flat(config)
+        self.jacobian_configuration = _flat(config)
+        self._jacobian_key = None if varies else self.jacobian_configuration
         return A
 
     def effective_stress(self, u_local: np.ndarray, histories: tuple, loads: tuple | None = None) -> np.ndarray:
@@ -261,6 +263,7 @@ class Equations:
         for k, (term, load, h) in enumerate(zip(self.terms, loads, histories)):
             term.add_jacobian(x_loc, load, h, J, None if config is None else config[k])
         J.assemble()
+        self.jacobian_configuration = flat
         self._jacobian_key = None if varies else flat
         self.n_jacobians += 1
         self._log_jacobian.end()

@@ -37,7 +37,7 @@ from petsc4py import PETSc
 
 from ..effects import event_total
 from ..records import Solve, SolveCost, counts_text
-from ..petsc_compat import converged_default, set_lag_preconditioner
+from ..petsc_compat import converged_default, reuse_preconditioner, set_lag_preconditioner
 from .fieldsplit import FieldSplit
 from .setup import apply_solver_defaults, is_direct
 
@@ -51,6 +51,12 @@ VERDICT_CONTRACTION = 0.1       # Newton's contraction below which an iterate's 
 def factorizations() -> int:
     """Numeric factorisations so far on this rank (PETSc's log events; 0 unless logging is on)."""
     return int(sum(event_total(name, "count") for name in ("MatLUFactorNum", "MatCholFctrNum")))
+
+
+def pc_setups() -> int:
+    """Preconditioner set-ups so far on this rank, a PC inside another's counted too (PETSc's log events; 0 unless
+    logging is on). A PC that keeps its preconditioner logs none."""
+    return int(event_total("PCSetUp", "count"))
 
 
 def mumps_factors(pc: Any) -> Any:
@@ -330,22 +336,50 @@ class StepSolver:
 
     def solve_response(self, rhs: Any, du: Any, config: tuple | None = None) -> tuple[bool, SolveCost]:
         """Solve J du = rhs with the Jacobian of the converged state in the terms' configuration ``config`` (None:
-        the state's; a fault's faces stuck, slipping or open) on the step's KSP: the direct solver's factors are kept
-        when they are of that Jacobian or the factor reuse keeps them, refactored otherwise. The Krylov solve stops
-        at -ksp_rtol of |rhs| (the step's absolute tolerance is for its forces). Returns (converged, its cost)."""
-        eq, t0, nfact, njac = self.eq, time.perf_counter(), factorizations(), self.eq.n_jacobians
-        self._jacobian(self.snes, self.state.u, eq.J, eq.J, config or None)
+        the state's; a fault's faces stuck, slipping or open) on the step's KSP. The Krylov solve stops at -ksp_rtol
+        of |rhs| (the step's absolute tolerance is for its forces). Returns (converged, its cost).
+
+        What the step built is used where it holds (``_response_operator``): in the configuration of the last
+        Newton Jacobian that Jacobian itself when it depends on the configuration only (no slipping face, no soil
+        cell on its virgin line), else the Jacobian at the state, preconditioned by the last Newton Jacobian's
+        preconditioner; in another configuration (a soil's cells on their cap) a new Jacobian and preconditioner.
+        A direct solver's factors are kept when the factor reuse keeps them (``FactorReuse``)."""
+        eq, t0, nfact, njac, npc = self.eq, time.perf_counter(), factorizations(), self.eq.n_jacobians, pc_setups()
         ksp = self.snes.getKSP()
-        ksp.setOperators(eq.J, eq.J)
+        pc = ksp.getPC()
+        reused = reuse_preconditioner(pc)
+        keep = self._response_operator(config)
         rtol, atol, divtol, max_it = ksp.getTolerances()
-        ksp.setTolerances(atol=0.0)
         try:
+            if keep:
+                pc.setReusePreconditioner(True)
+            ksp.setTolerances(atol=0.0)
             ksp.solve(rhs, du)
         finally:
             ksp.setTolerances(rtol=rtol, atol=atol, divtol=divtol, max_it=max_it)
+            if keep:
+                pc.setReusePreconditioner(reused)
         cost = SolveCost(0, int(ksp.getIterationNumber()), time.perf_counter() - t0,
-                         int(factorizations() - nfact), int(eq.n_jacobians - njac))
+                         int(factorizations() - nfact), int(eq.n_jacobians - njac), pc_setups=pc_setups() - npc)
         return ksp.getConvergedReason() > 0, cost
+
+    def _response_operator(self, config: tuple | None) -> bool:
+        """Put the Jacobian of the converged state in ``config`` into the KSP (assembled only when it differs from
+        the one there, ``Equations.assemble_jacobian``); returns whether the preconditioner built for the last
+        Jacobian is to be kept: that Jacobian was of the same configuration (collective), so it differs from this
+        one by the slipping faces' and compacting cells' values at most, and a Krylov method, not a direct solve
+        alone (preonly), runs to the tolerance on the new operator. A direct solver's factors are the factor
+        reuse's decision (made in ``_jacobian``)."""
+        eq = self.eq
+        before = eq.jacobian_configuration
+        self._jacobian(self.snes, self.state.u, eq.J, eq.J, config or None)
+        ksp = self.snes.getKSP()
+        ksp.setOperators(eq.J, eq.J)
+        after = eq.jacobian_configuration
+        same = before is not None and after is not None and len(before) == len(after) and \
+            bool(np.array_equal(before, after))
+        same = self.comm.tompi4py().allreduce(same, op=MPI.LAND)
+        return same and self.reuse is None and ksp.getType() != PETSc.KSP.Type.PREONLY
 
     # -- one step ------------------------------------------------------------------------------------
     def solve_step(self, t: float) -> Solve:

@@ -142,6 +142,18 @@ def test_block_margins_on_one_and_two_ranks(block):
     assert b["min_drawdown_m"] == pytest.approx(a["min_drawdown_m"], rel=1e-9)
 
 
+def test_block_margin_solve_keeps_the_step_jacobian(block):
+    """Every face stuck after the step and under a further drawdown: the margins' Jacobian is the last Newton
+    Jacobian, which the margin solve uses as it is, with its factors: no Jacobian assembled, no factorisation, no
+    preconditioner set up, on 1 and 2 ranks."""
+    _, _, _, runs = block
+    for ranks in (1, 2):
+        records = [r["margin_solve"] for r in runs[ranks]["steps"] if "margin_solve" in r]
+        assert len(records) == 1 and records[0]["solved"] and records[0]["converged"], ranks
+        assert (records[0]["jacobians"], records[0]["factorizations"], records[0]["pc_setups"]) == (0, 0, 0), ranks
+        assert 1 <= records[0]["ksp_its"] <= 2, ranks
+
+
 @pytest.mark.parametrize("factor, fails", [(1.02, True), (0.98, False)])
 def test_block_slips_past_its_margin(block, tmp_path, factor, fails):
     """Drawn down 2 % past the margin every face slips; 2 % short of it none does."""
@@ -204,6 +216,24 @@ def test_aquifer_margins_on_one_and_two_ranks(aquifer):
     a, b = runs[1]["faults"]["fault"]["margin"], runs[2]["faults"]["fault"]["margin"]
     assert b["min_face"] == a["min_face"] and b["min_mode"] == a["min_mode"]
     assert b["min_xyz_m"] == pytest.approx(a["min_xyz_m"], rel=1e-12)
+
+
+def test_aquifer_margin_solve_keeps_the_iterative_preconditioner(aquifer):
+    """The iterative solver (AMG in a Schur fieldsplit), 2 ranks: in the steps where faces slip the margin solve
+    assembles the Jacobian at the converged state (a slipping face's rows depend on it) and keeps the
+    preconditioner Newton's last Jacobian, of the same faces' states, was given: no preconditioner set up. Its
+    margins are MUMPS's to 1e-5."""
+    d, extra, _ = aquifer
+    _, s = run_scene(AQUIFER, d / "iterative", ranks=2, extra=[*extra, "-pfault_solver", "iterative"])
+    slipping = [r for r in s["steps"] if r["slip"] > 0]
+    assert len(slipping) == 8
+    for r in slipping:
+        solve = r["margin_solve"]
+        assert solve["converged"] and (solve["jacobians"], solve["pc_setups"]) == (1, 0), r["step"]
+    mumps, iterative = fault_steps(d / "out2"), fault_steps(d / "iterative")
+    for k in mumps:
+        np.testing.assert_allclose(iterative[k]["margin_drawdown_m"], mumps[k]["margin_drawdown_m"], rtol=1e-5,
+                                   atol=1e-8)
 
 
 @pytest.mark.parametrize("factor, fails", [(1.02, True), (0.98, False)])
@@ -294,6 +324,12 @@ def test_soil_aquifer_margins_on_one_and_two_ranks(soil_aquifer):
     step = runs[1]["steps"][-1]
     m = step["faults"]["fault"]["margin"]
     assert step["cells_virgin"] == 436 and step["cells_elastic"] == 0 and step["margin_solve"]["converged"]
+    # the virgin line in the cells on their cap is not the configuration of the last Jacobian: one of its own,
+    # factored at the initial state (the gravity solve's), on the factors the factor reuse keeps after the step
+    first = runs[1]["steps"][0]["margin_solve"]
+    assert (first["jacobians"], first["factorizations"], first["pc_setups"]) == (1, 1, 1)
+    solve = step["margin_solve"]
+    assert solve["jacobians"] == 1 and solve["pc_setups"] == solve["factorizations"]
     assert m["faces_failed"] == 0 and m["min_mode"] == "slip"
     assert m["min_drawdown_m"] == pytest.approx(0.05378, rel=1e-3)
     one, two = fault_steps(d / "out1"), fault_steps(d / "out2")
