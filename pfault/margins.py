@@ -22,7 +22,7 @@ from petsc4py import PETSc
 
 from .errors import InputError
 from .records import SolveCost, merge_json
-from .solver.response import drawdown_response
+from .solver.response import Response, drawdown_response
 from .solver.terms import MarginSettings
 
 
@@ -71,10 +71,13 @@ class MarginStep:
 
 class Margins:
     """The margins of the terms of ``model``'s equations, measured with the step solver ``solver`` (its KSP and
-    factors) at a converged state; ``settings``: MarginSettings, None when they are off (-pfault_margins false)."""
+    factors) at a converged state; ``settings``: MarginSettings, None when they are off (-pfault_margins false).
+    Keeps the last output time's response, which the next one's solve starts from where it holds
+    (pfault.solver.response.Response.start_for)."""
 
     def __init__(self, model: Any, solver: Any, settings: MarginSettings | None) -> None:
         self.model, self.solver, self.settings = model, solver, settings
+        self.response: Response | None = None
 
     def measure(self, state: Any, t: float) -> MarginStep | None:
         """The margins at the converged state ``state`` at time t (collective); None when they are off, the
@@ -99,7 +102,9 @@ class Margins:
         live = sum(term.margin_parts(x_loc, load, h) for term, load, h in zip(eq.terms, eq.loads.term_loads,
                                                                               state.histories))
         response = drawdown_response(eq, self.solver, state, t, -self.settings.rho_g * loaded.astype(float),
-                                     solve=live > 0)
+                                     solve=live > 0, previous=self.response)
+        if response.owned is not None:
+            self.response = response
         parts = tuple(term.margins(x_loc, response.dx, load, rate, h, self.model.mesh, self.settings)
                       for term, load, rate, h in zip(eq.terms, eq.loads.term_loads, response.rates, state.histories))
         return MarginStep(parts, response.converged, response.cost, live > 0)

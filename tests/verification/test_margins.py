@@ -145,13 +145,14 @@ def test_block_margins_on_one_and_two_ranks(block):
 def test_block_margin_solve_keeps_the_step_jacobian(block):
     """Every face stuck after the step and under a further drawdown: the margins' Jacobian is the last Newton
     Jacobian, which the margin solve uses as it is, with its factors: no Jacobian assembled, no factorisation, no
-    preconditioner set up, on 1 and 2 ranks."""
+    preconditioner set up, on 1 and 2 ranks; it starts from the response at time 0 (the same faces' states and
+    loaded cells), which is its answer: no Krylov iteration."""
     _, _, _, runs = block
     for ranks in (1, 2):
         records = [r["margin_solve"] for r in runs[ranks]["steps"] if "margin_solve" in r]
         assert len(records) == 1 and records[0]["solved"] and records[0]["converged"], ranks
         assert (records[0]["jacobians"], records[0]["factorizations"], records[0]["pc_setups"]) == (0, 0, 0), ranks
-        assert 1 <= records[0]["ksp_its"] <= 2, ranks
+        assert records[0]["ksp_its"] == 0, ranks
 
 
 @pytest.mark.parametrize("factor, fails", [(1.02, True), (0.98, False)])
@@ -219,21 +220,27 @@ def test_aquifer_margins_on_one_and_two_ranks(aquifer):
 
 
 def test_aquifer_margin_solve_keeps_the_iterative_preconditioner(aquifer):
-    """The iterative solver (AMG in a Schur fieldsplit), 2 ranks: in the steps where faces slip the margin solve
-    assembles the Jacobian at the converged state (a slipping face's rows depend on it) and keeps the
-    preconditioner Newton's last Jacobian, of the same faces' states, was given: no preconditioner set up. Its
-    margins are MUMPS's to 1e-5."""
+    """The iterative solver (AMG in a Schur fieldsplit) on 1 and 2 ranks: in the steps where faces slip the margin
+    solve assembles the Jacobian at the converged state (a slipping face's rows depend on it) and keeps the
+    preconditioner Newton's last Jacobian, of the same faces' states, was given: no preconditioner set up. While
+    every face sticks (years 1 and 2) it starts from the last output time's response, its answer: no Krylov
+    iteration. Its margins are MUMPS's (the direct solve of the same run on as many ranks) to 1e-4 relative, the
+    accuracy they are stated to (pfault.solver.policy.MARGIN_RTOL)."""
     d, extra, _ = aquifer
-    _, s = run_scene(AQUIFER, d / "iterative", ranks=2, extra=[*extra, "-pfault_solver", "iterative"])
-    slipping = [r for r in s["steps"] if r["slip"] > 0]
-    assert len(slipping) == 8
-    for r in slipping:
-        solve = r["margin_solve"]
-        assert solve["converged"] and (solve["jacobians"], solve["pc_setups"]) == (1, 0), r["step"]
-    mumps, iterative = fault_steps(d / "out2"), fault_steps(d / "iterative")
-    for k in mumps:
-        np.testing.assert_allclose(iterative[k]["margin_drawdown_m"], mumps[k]["margin_drawdown_m"], rtol=1e-5,
-                                   atol=1e-8)
+    for ranks in (1, 2):
+        _, s = run_scene(AQUIFER, d / f"iterative{ranks}", ranks=ranks, extra=[*extra, "-pfault_solver", "iterative"])
+        slipping = [r for r in s["steps"] if r["slip"] > 0]
+        assert len(slipping) == 8, ranks
+        for r in slipping:
+            solve = r["margin_solve"]
+            assert solve["converged"] and (solve["jacobians"], solve["pc_setups"]) == (1, 0), (ranks, r["step"])
+        assert [s["steps"][k]["margin_solve"]["ksp_its"] for k in (1, 2)] == [0, 0], ranks
+        mumps, iterative = fault_steps(d / f"out{ranks}"), fault_steps(d / f"iterative{ranks}")
+        assert sorted(iterative) == sorted(mumps)
+        for k in mumps:
+            np.testing.assert_allclose(iterative[k]["margin_drawdown_m"], mumps[k]["margin_drawdown_m"], rtol=1e-4,
+                                       atol=0.0)
+            assert np.array_equal(iterative[k]["margin_mode"], mumps[k]["margin_mode"]), (ranks, k)
 
 
 @pytest.mark.parametrize("factor, fails", [(1.02, True), (0.98, False)])
