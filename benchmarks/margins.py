@@ -3,17 +3,19 @@
 they cost.
 
     python benchmarks/margins.py [--ranks 2] [--scenes aquifer,wuxi,fissure] [--aquifer-size 1] [--wuxi-size 1]
-                                 [--out runs/margins] [-- -option value ...]
+                                 [--pairs 2] [--no-check] [--out runs/margins] [-- -option value ...]
 
 For each scene (config/faulted_aquifer.opts on benchmarks/faulted_aquifer_mesh.py's mesh, config/wuxi.opts,
 config/wuxi_fissure.opts):
 
-1. the run with margins (the default) and (--off) the same run with -pfault_margins false, one after the other on
-   the same ranks: per output time the step's wall time, Newton iterations and factorisations, the margin's linear solve
-   (wall time, Krylov iterations, factorisations) and the smallest margin (m of drawdown, mode, face); the totals of
-   both runs (the margins' share of the solve time; the steps' own iterations and factorisations with and without
-   them: the margin's solve may change which factors the next step keeps);
-2. at the last output time with a face that has not failed (a run to that time, continued from its checkpoint): the
+1. the run with margins (the default) and (--off) the same run with -pfault_margins false, in alternation --pairs
+   times on the same ranks (on, off, on, off, ...: the machine's load moves both alike): per output time the step's
+   wall time, Newton iterations and factorisations, the margin's linear solve (wall time, Krylov iterations,
+   factorisations) and the smallest margin (m of drawdown, mode, face); per pair the end-to-end wall and CPU times
+   (all ranks) of both runs, the load average and the margins' own time the run reports; the overhead of the
+   margins from the medians (wall and CPU) and whether the steps' Newton and Krylov iterations are the same with and
+   without them;
+2. (unless --no-check) at the last output time with a face that has not failed (a run to that time, continued from its checkpoint): the
    drawdown of every loaded material raised by the smallest margin plus 2 % and minus 2 %; whether the face reported
    slips, opens or breaks in each (the target: in the first, not in the second).
 
@@ -63,7 +65,7 @@ def run(name: str, tag: str, options: list[str], args: argparse.Namespace) -> di
         print("  " + "\n  ".join(log.output.strip().splitlines()[-5:]))
         return None
     s = fg.read_summary(out)
-    s["end_to_end_s"], s["dir"] = log.wall, out
+    s["end_to_end_s"], s["cpu_s"], s["load"], s["dir"] = log.wall, log.cpu, log.load, out
     return s
 
 
@@ -92,7 +94,35 @@ def totals(s: dict) -> dict:
             "newton": sum(r["newton_its"] for r in steps), "lu": sum(r.get("factorizations", 0) for r in steps),
             "margin_s": sum(r.get("margin_solve", {}).get("wall_s", 0.0) for r in s["steps"]),
             "margin_lu": sum(r.get("margin_solve", {}).get("factorizations", 0) for r in s["steps"]),
-            "margin_solves": sum(1 for r in s["steps"] if r.get("margin_solve", {}).get("solved"))}
+            "margin_solves": sum(1 for r in s["steps"] if r.get("margin_solve", {}).get("solved")),
+            "margin_its": sum(r.get("margin_solve", {}).get("ksp_its", 0) for r in s["steps"]),
+            "steps_its": [(r["newton_its"], r.get("ksp_its", 0)) for r in steps],
+            "cpu_s": s["cpu_s"], "load": s["load"]}
+
+
+def overhead(name: str, ons: list[dict], offs: list[dict]) -> dict:
+    """The pairs' figures and the margins' overhead from the medians of the runs with and without them."""
+    print(f"\n{name}: | pair | with margins: wall / CPU (s) | margins' own (s) | without: wall / CPU (s) | load |\n"
+          "|---|---|---|---|---|")
+    for k, (a, b) in enumerate(zip(ons, offs)):
+        print(f"| {k + 1} | {a['end_to_end_s']:.1f} / {a['cpu_s']:.1f} | {a['margin_s']:.2f} | "
+              f"{b['end_to_end_s']:.1f} / {b['cpu_s']:.1f} | {a['load']:.1f}, {b['load']:.1f} |")
+    med = {key: (float(np.median([r[key] for r in ons])), float(np.median([r[key] for r in offs])))
+           for key in ("end_to_end_s", "cpu_s", "margin_s")}
+    same = all(r["steps_its"] == offs[0]["steps_its"] for r in ons + offs)
+    out = {"wall_on_s": med["end_to_end_s"][0], "wall_off_s": med["end_to_end_s"][1], "cpu_on_s": med["cpu_s"][0],
+           "cpu_off_s": med["cpu_s"][1], "margin_s": med["margin_s"][0], "same_step_iterations": same,
+           "load": [r["load"] for r in ons + offs]}
+    for key in ("wall", "cpu"):
+        on, off = out[f"{key}_on_s"], out[f"{key}_off_s"]
+        out[f"{key}_overhead_pct"] = 100.0 * (on - off) / off
+    out["margin_pct_of_run"] = 100.0 * out["margin_s"] / out["wall_on_s"]
+    print(f"{name}: medians of {len(ons)} pairs: wall {out['wall_on_s']:.1f} s with margins, {out['wall_off_s']:.1f} "
+          f"without ({out['wall_overhead_pct']:+.1f} %); CPU {out['cpu_on_s']:.1f} s, {out['cpu_off_s']:.1f} s "
+          f"({out['cpu_overhead_pct']:+.1f} %); the margins' own time {out['margin_s']:.2f} s "
+          f"({out['margin_pct_of_run']:.1f} % of the run with them); steps' Newton and Krylov iterations "
+          f"{'the same' if same else 'DIFFERENT'} with and without")
+    return out
 
 
 def table(points: list) -> str:
@@ -144,6 +174,8 @@ def main() -> int:
     ap.add_argument("--wuxi-size", type=float, default=1.0, help="Wuxi's -pfault_mesh_size_factor")
     ap.add_argument("--out", default="runs/margins")
     ap.add_argument("--off", default=None, help="the scenes also run with -pfault_margins false (default: all)")
+    ap.add_argument("--pairs", type=int, default=2, help="runs with and without margins, in alternation")
+    ap.add_argument("--no-check", action="store_true", help="skip the runs continued past the smallest margin")
     ap.add_argument("--timeout", type=float, default=7200.0)
     ap.add_argument("extra", nargs="*", help="options for every run (after --)")
     args = ap.parse_args()
@@ -152,24 +184,30 @@ def main() -> int:
     report, ok = {}, True
     offs = args.scenes.split(",") if args.off is None else args.off.split(",")
     for name in args.scenes.split(","):
-        on = run(name, "margins", [], args)
-        off = run(name, "off", ["-pfault_margins", "false"], args) if name in offs else None
-        if on is None or (name in offs and off is None):
+        ons, offs_runs = [], []
+        for k in range(args.pairs if name in offs else 1):
+            tag = "" if k == 0 else f"-{k + 1}"
+            ons.append(run(name, "margins" + tag, [], args))
+            if name in offs:
+                offs_runs.append(run(name, "off" + tag, ["-pfault_margins", "false"], args))
+        if any(r is None for r in ons + offs_runs):
             ok = False
             continue
+        on = ons[0]
         rows = steps_table(name, on)
         t_on = totals(on)
         print(f"\n{name}: with margins solve {t_on['solve_s']:.2f} s, {t_on['newton']} Newton, {t_on['lu']} LU; "
-              f"margin solves {t_on['margin_solves']} x, {t_on['margin_s']:.2f} s "
+              f"margin solves {t_on['margin_solves']} x, {t_on['margin_its']} Krylov iterations, {t_on['margin_s']:.2f} s "
               f"({100 * t_on['margin_s'] / max(t_on['solve_s'], 1e-300):.1f} % of the steps' solve time), "
               f"{t_on['margin_lu']} LU; end to end {t_on['end_to_end_s']:.1f} s")
-        t_off = totals(off) if off is not None else None
+        t_off = totals(offs_runs[0]) if offs_runs else None
         if t_off is not None:
             print(f"{name}: without: solve {t_off['solve_s']:.2f} s, {t_off['newton']} Newton, {t_off['lu']} LU; "
                   f"end to end {t_off['end_to_end_s']:.1f} s")
-        check = plus_minus(name, on, rows, args)
-        ok = ok and check is not None
-        report[name] = {"with": t_on, "without": t_off, "steps": rows, "plus_minus": check,
+        pairs = overhead(name, [totals(r) for r in ons], [totals(r) for r in offs_runs]) if offs_runs else None
+        check = None if args.no_check else plus_minus(name, on, rows, args)
+        ok = ok and (args.no_check or check is not None)
+        report[name] = {"with": t_on, "without": t_off, "pairs": pairs, "steps": rows, "plus_minus": check,
                         "faces": int(on["mesh"]["fault_faces"]), "dofs": int(on["dofs"])}
     print(json.dumps({"ranks": args.ranks, "scenes": report}, default=lambda v: None if v is np.nan else v))
     return 0 if ok else 1

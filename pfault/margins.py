@@ -72,8 +72,8 @@ class MarginStep:
 class Margins:
     """The margins of the terms of ``model``'s equations, measured with the step solver ``solver`` (its KSP and
     factors) at a converged state; ``settings``: MarginSettings, None when they are off (-pfault_margins false).
-    Keeps the last output time's response, which the next one's solve starts from where it holds
-    (pfault.solver.response.Response.start_for)."""
+    Keeps the last output time's response, whose rate the next one takes where its system is the same
+    (pfault.solver.response.Response.reused)."""
 
     def __init__(self, model: Any, solver: Any, settings: MarginSettings | None) -> None:
         self.model, self.solver, self.settings = model, solver, settings
@@ -103,7 +103,7 @@ class Margins:
                                                                               state.histories))
         response = drawdown_response(eq, self.solver, state, t, -self.settings.rho_g * loaded.astype(float),
                                      solve=live > 0, previous=self.response)
-        if response.owned is not None:
+        if response.system is not None:
             self.response = response
         parts = tuple(term.margins(x_loc, response.dx, load, rate, h, self.model.mesh, self.settings)
                       for term, load, rate, h in zip(eq.terms, eq.loads.term_loads, response.rates, state.histories))

@@ -131,6 +131,17 @@ class FactorReuse:
         """The last linear solve on kept factors took more iterations than a factorisation costs."""
         return self.cost is not None and (self._kept_its or 0) > self.cost
 
+    def aside(self) -> int | None:
+        """Before a solve outside the steps (the margins'): what ``resume`` needs to forget its iterations."""
+        return self._kept_its
+
+    def resume(self, kept: int | None) -> None:
+        """After a solve outside the steps: where it ran on kept factors its iterations do not count toward
+        refactoring (``kept_too_long``: the last step's solves decide, as without it); where it factored anew the
+        new factors are the ones the next step starts on."""
+        if self._kept_its is not None:
+            self._kept_its = kept
+
     def monitor(self, ksp: Any, its: int, rnorm: float) -> None:
         """KSP monitor (collective): at the first residual of a solve on new factors, their cost and null pivots;
         counts the iterations of a solve on kept factors."""
@@ -341,12 +352,12 @@ class StepSolver:
         ksp.solve(b, x)
         return int(ksp.getConvergedReason())
 
-    def solve_response(self, rhs: Any, du: Any, config: tuple | None = None, guess: bool = False
-                       ) -> tuple[bool, SolveCost]:
-        """Solve J du = rhs with the Jacobian of the converged state in the terms' configuration ``config`` (None:
-        the state's; a fault's faces stuck, slipping or open) on the step's KSP, from du when ``guess`` (else from
-        zero). The Krylov solve stops at MARGIN_RTOL (or -ksp_rtol, if larger) of |rhs|, whatever the start (the
-        step's absolute tolerance is for its forces). Returns (converged, its cost).
+    def solve_response(self, rhs: Any, du: Any, config: tuple | None = None) -> tuple[bool, SolveCost]:
+        """Solve J du = rhs from zero with the Jacobian of the converged state in the terms' configuration ``config``
+        (None: the state's; a fault's faces stuck, slipping or open) on the step's KSP. The Krylov solve stops at
+        MARGIN_RTOL (or -ksp_rtol, if larger) of |rhs| (the step's absolute tolerance is for its forces). Its
+        iterations on kept factors do not count toward the next step's factor reuse (``FactorReuse.aside``): the
+        steps solve the same with margins or without. Returns (converged, its cost).
 
         What the step built is used where it holds (``_response_operator``): in the configuration of the last
         Newton Jacobian that Jacobian itself when it depends on the configuration only (no slipping face, no soil
@@ -357,23 +368,20 @@ class StepSolver:
         ksp = self.snes.getKSP()
         pc = ksp.getPC()
         reused = reuse_preconditioner(pc)
+        kept = self.reuse.aside() if self.reuse is not None else None
         keep = self._response_operator(config)
         rtol, atol, divtol, max_it = ksp.getTolerances()
-        guess = guess and ksp.getType() != PETSc.KSP.Type.PREONLY      # a direct solve alone takes no start
-        nonzero = ksp.getInitialGuessNonzero()
         try:
             if keep:
                 pc.setReusePreconditioner(True)
             ksp.setTolerances(rtol=max(rtol, MARGIN_RTOL), atol=0.0)
-            ksp.setInitialGuessNonzero(guess)
-            if not guess:
-                du.zeroEntries()
             ksp.solve(rhs, du)
         finally:
-            ksp.setInitialGuessNonzero(nonzero)
             ksp.setTolerances(rtol=rtol, atol=atol, divtol=divtol, max_it=max_it)
             if keep:
                 pc.setReusePreconditioner(reused)
+            if self.reuse is not None:
+                self.reuse.resume(kept)
         cost = SolveCost(0, int(ksp.getIterationNumber()), time.perf_counter() - t0,
                          int(factorizations() - nfact), int(eq.n_jacobians - njac), pc_setups=pc_setups() - npc)
         return ksp.getConvergedReason() > 0, cost

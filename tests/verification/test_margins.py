@@ -145,8 +145,8 @@ def test_block_margins_on_one_and_two_ranks(block):
 def test_block_margin_solve_keeps_the_step_jacobian(block):
     """Every face stuck after the step and under a further drawdown: the margins' Jacobian is the last Newton
     Jacobian, which the margin solve uses as it is, with its factors: no Jacobian assembled, no factorisation, no
-    preconditioner set up, on 1 and 2 ranks; it starts from the response at time 0 (the same faces' states and
-    loaded cells), which is its answer: no Krylov iteration."""
+    preconditioner set up, on 1 and 2 ranks; the system is time 0's (every face stuck, the same loaded cells and
+    right-hand side), whose rate it takes: no Krylov iteration."""
     _, _, _, runs = block
     for ranks in (1, 2):
         records = [r["margin_solve"] for r in runs[ranks]["steps"] if "margin_solve" in r]
@@ -223,8 +223,7 @@ def test_aquifer_margin_solve_keeps_the_iterative_preconditioner(aquifer):
     """The iterative solver (AMG in a Schur fieldsplit) on 1 and 2 ranks: in the steps where faces slip the margin
     solve assembles the Jacobian at the converged state (a slipping face's rows depend on it) and keeps the
     preconditioner Newton's last Jacobian, of the same faces' states, was given: no preconditioner set up. While
-    every face sticks (years 1 and 2) it starts from the last output time's response, its answer: no Krylov
-    iteration. Its margins are MUMPS's (the direct solve of the same run on as many ranks) to 1e-4 relative, the
+    every face sticks (years 1 and 2) the system is the last output time's, whose rate it takes: no Krylov iteration. Its margins are MUMPS's (the direct solve of the same run on as many ranks) to 1e-4 relative, the
     accuracy they are stated to (pfault.solver.policy.MARGIN_RTOL)."""
     d, extra, _ = aquifer
     for ranks in (1, 2):
