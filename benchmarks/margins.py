@@ -15,9 +15,9 @@ config/wuxi_fissure.opts):
    (all ranks) of both runs, the load average and the margins' own time the run reports; the overhead of the
    margins from the medians (wall and CPU) and whether the steps' Newton and Krylov iterations are the same with and
    without them;
-2. (unless --no-check) at the last output time with a face that has not failed (a run to that time, continued from its checkpoint): the
-   drawdown of every loaded material raised by the smallest margin plus 2 % and minus 2 %; whether the face reported
-   slips, opens or breaks in each (the target: in the first, not in the second).
+2. (unless --no-check) at the last output time with a face that has not failed (a run to that time, continued from
+   its checkpoint): the drawdown of every loaded material raised by the smallest margin plus 2 % and minus 2 %;
+   whether the face reported slips, opens or breaks in each (the target: in the first, not in the second).
 
 Options after ``--`` go to every run. Prints the tables and one JSON line; exit code 0 when every run completed.
 """
@@ -197,7 +197,8 @@ def main() -> int:
         rows = steps_table(name, on)
         t_on = totals(on)
         print(f"\n{name}: with margins solve {t_on['solve_s']:.2f} s, {t_on['newton']} Newton, {t_on['lu']} LU; "
-              f"margin solves {t_on['margin_solves']} x, {t_on['margin_its']} Krylov iterations, {t_on['margin_s']:.2f} s "
+              f"margin solves {t_on['margin_solves']} x, {t_on['margin_its']} Krylov iterations, "
+              f"{t_on['margin_s']:.2f} s "
               f"({100 * t_on['margin_s'] / max(t_on['solve_s'], 1e-300):.1f} % of the steps' solve time), "
               f"{t_on['margin_lu']} LU; end to end {t_on['end_to_end_s']:.1f} s")
         t_off = totals(offs_runs[0]) if offs_runs else None
