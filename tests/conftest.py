@@ -1,7 +1,6 @@
-"""Shared helpers: run pfault (or a script) on 1 rank directly or on N ranks under mpirun, with timeouts.
-
-They are studies/run.py's: the repository root goes first on the import path so that the tests import the
-studies (studies/) beside the package."""
+"""Shared helpers: run pfault (or a script) on 1 rank directly or on N ranks under mpirun, with timeouts, by
+pfault.tools.runs (the runner of the studies and the benchmarks too). The repository root goes first on the import
+path so that the tests import the studies (studies/) beside the package."""
 
 import json
 import os
@@ -14,8 +13,7 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
 from pfault.post.rundir import read_fields, read_summary  # noqa: E402
-from studies.run import command, run_captured  # noqa: E402,F401  (command: tests that start runs)
-from studies.run import mpi_env as study_mpi_env  # noqa: E402
+from pfault.tools.runs import command, environment, run_captured  # noqa: E402,F401  (command, run_captured: tests)
 
 PY = sys.executable
 
@@ -63,11 +61,14 @@ def flow_box(tmp_path):
 
 
 def mpi_env():
-    return study_mpi_env(oversubscribe=True)
+    """The tests' runs' environment: pfault.tools.runs.environment, more ranks than cores allowed."""
+    return environment(oversubscribe=True)
 
 
-def run(args, ranks=1, timeout=TIMEOUT, check=True):
-    proc = run_captured(args, ranks, timeout=timeout, env=mpi_env())
+def run(args, ranks=1, timeout=TIMEOUT, check=True, cwd=REPO):
+    """``python ARGS`` on ``ranks`` ranks from ``cwd`` (the repository's root); the CompletedProcess, checked to
+    exit 0 unless ``check`` is False."""
+    proc = run_captured(args, ranks, cwd=cwd, env=mpi_env(), timeout=timeout)
     if check and proc.returncode != 0:
         raise AssertionError(f"{' '.join(args)} on {ranks} rank(s) exited {proc.returncode}\n"
                              f"stdout:\n{proc.stdout[-4000:]}\nstderr:\n{proc.stderr[-4000:]}")
