@@ -61,8 +61,12 @@ def flow_box(tmp_path):
 
 
 def mpi_env():
-    """The tests' runs' environment: pfault.tools.runs.environment, more ranks than cores allowed."""
-    return environment(oversubscribe=True)
+    """The tests' runs' environment: pfault.tools.runs.environment, more ranks than cores allowed, and ranks that
+    yield their core while they wait for a message: the suite's workers run side by side on the cores, and a rank
+    spinning in a receive would take the core its partner needs."""
+    env = environment(oversubscribe=True)
+    env["OMPI_MCA_mpi_yield_when_idle"] = "1"
+    return env
 
 
 def run(args, ranks=1, timeout=TIMEOUT, check=True, cwd=REPO):

@@ -27,8 +27,8 @@ def _alive(pid):
 def test_a_run_past_its_timeout_is_killed_with_what_it_started(tmp_path):
     t0 = time.perf_counter()
     with pytest.raises(subprocess.TimeoutExpired) as err:
-        runs.run_captured(["-c", PARENT], timeout=3, cwd=str(tmp_path))
-    assert time.perf_counter() - t0 < 30
+        runs.run_captured(["-c", PARENT], timeout=10, cwd=str(tmp_path))
+    assert time.perf_counter() - t0 < 40
     grandchild = int(err.value.stdout.split()[0])
     deadline = time.time() + 10
     while _alive(grandchild) and time.time() < deadline:
