@@ -41,15 +41,19 @@ ERROR_PREFIXES = ("pfault: error:", "pfault: internal error:")
 LOAD_POLL = 2.0                    # s between samples of the 1-minute load average during a logged run
 SOURCE_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(pfault.__file__)))   # where this pfault lies
 SHOWN_PYTHON = ".venv/bin/python"  # how a command shows the interpreter in reports
+# what an MPI launcher, or MPI started in this process, puts in the environment: a run is a new MPI job and must
+# not see it (an mpirun that inherits a started MPI's PMIx server ends at once with exit code 1, saying nothing)
+LAUNCH_CONTEXT = ("PMIX_", "PMI_", "OMPI_COMM_WORLD_", "OMPI_MCA_ess", "OMPI_MCA_pmix", "OMPI_MCA_orte_",
+                  "OMPI_APP_CTX_", "OMPI_COMMAND", "OMPI_FILE_LOCATION", "ORTE_", "PRTE_", "HYDRA_")
 _LIVE: set = set()                 # runs under way (stopped when their caller is interrupted)
 _LIVE_LOCK = threading.Lock()
 
 
 def environment(base: Mapping[str, str] | None = None, oversubscribe: bool = False) -> dict[str, str]:
-    """The environment of a run: ``base`` (this process's by default) with one BLAS thread per rank, Open MPI
-    allowed as root and quiet about the shared-memory copy, optionally more ranks than cores, and (from a
-    checkout) this pfault first on the import path."""
-    env = dict(os.environ if base is None else base)
+    """The environment of a run: ``base`` (this process's by default) without an MPI launcher's context
+    (LAUNCH_CONTEXT), with one BLAS thread per rank, Open MPI allowed as root and quiet about the shared-memory
+    copy, optionally more ranks than cores, and (from a checkout) this pfault first on the import path."""
+    env = {k: v for k, v in (os.environ if base is None else base).items() if not k.startswith(LAUNCH_CONTEXT)}
     env.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", OMPI_MCA_btl_vader_single_copy_mechanism="none")
     if os.path.basename(SOURCE_ROOT) not in ("site-packages", "dist-packages"):     # a checkout, not installed
         paths = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != SOURCE_ROOT]

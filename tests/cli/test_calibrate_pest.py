@@ -43,9 +43,9 @@ def test_pest_files_run_the_same_model(tmp_path):
     assert np.allclose(pst.observation_data.obsval, [-0.02, -0.005, -0.013, -0.001, -0.001])
     # PEST's part: values into the template, the model command in the directory, the outputs read back
     pst.write_input_files(pst_path=str(pest))
-    run = subprocess.run(shlex.split(pst.model_command[0]), cwd=pest, env=mpi_env(), capture_output=True,
-                         text=True, timeout=120)
-    assert run.returncode == 0, run.stderr
+    model = subprocess.run(shlex.split(pst.model_command[0]), cwd=pest, env=mpi_env(), capture_output=True,
+                           text=True, timeout=120)
+    assert model.returncode == 0, model.stderr
     simulated = pyemu.pst_utils.process_output_files(pst, pst_path=str(pest)).loc[pst.obs_names, "obsval"].values
     # the built-in loop's values for the same parameters
     params = read_parameters(str(p))

@@ -61,3 +61,16 @@ def test_commands_on_one_and_more_ranks():
     run = runs.Run("config/oedometer.opts", "out", {"pfault_time_steps": 2}, ranks=2)
     assert runs.pfault_command(run)[:3] == ["mpirun", "-n", "2"]
     assert runs.pfault_args(run)[-2:] == ["-pfault_time_steps", "2"]
+
+
+def test_a_run_does_not_inherit_an_mpi_launch_context(tmp_path):
+    """A run started from a process with a started MPI (whose PMIx server variables it would inherit) is a new
+    MPI job: the launcher's variables are left out, the user's Open MPI settings kept."""
+    base = {"PATH": os.environ["PATH"], "PMIX_SERVER_URI41": "x", "OMPI_MCA_ess": "singleton",
+            "OMPI_COMM_WORLD_RANK": "0", "OMPI_MCA_btl_vader_single_copy_mechanism": "none", "HOME": "/root"}
+    env = runs.environment(base)
+    assert not any(k.startswith(("PMIX_", "OMPI_MCA_ess", "OMPI_COMM_WORLD")) for k in env)
+    assert env["OMPI_MCA_btl_vader_single_copy_mechanism"] == "none" and env["HOME"] == "/root"
+    proc = runs.run_captured(["-c", "print('ok')"], ranks=2, cwd=str(tmp_path),
+                             env=runs.environment(dict(os.environ, **base)), timeout=120)
+    assert proc.returncode == 0 and proc.stdout.split() == ["ok", "ok"], proc.stderr
