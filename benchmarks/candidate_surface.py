@@ -27,10 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
-import subprocess
 import sys
-import time
 
 import h5py
 import numpy as np
@@ -38,7 +35,7 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 from pfault.post.rundir import read_summary  # noqa: E402
-from studies.run import command, mpi_env  # noqa: E402
+from pfault.tools.runs import environment, run_captured, run_logged  # noqa: E402
 
 CANDIDATE = ["-pfault_fault_fault_tensile_strength", "20*kPa", "-pfault_fault_fault_cohesion", "50*kPa",
              "-pfault_fault_fault_residual_cohesion", "0"]
@@ -86,8 +83,10 @@ def make_scene(name: str, out: str, size: float) -> tuple[str, str]:
     """The scene file and mesh of ``name`` under ``out`` (the mesh made once)."""
     mesh = os.path.join(out, f"{name}_{size:g}.msh")
     if not os.path.exists(mesh):
-        subprocess.run([sys.executable, os.path.join(REPO, "benchmarks", "basin_fault_mesh.py"), mesh, "--size",
-                        str(size), *MESHES[name]], check=True, cwd=REPO, env=mpi_env())
+        made = run_captured([os.path.join(REPO, "benchmarks", "basin_fault_mesh.py"), mesh, "--size", str(size),
+                             *MESHES[name]], cwd=REPO)
+        if made.returncode != 0:
+            raise SystemExit(f"basin_fault_mesh.py: exit {made.returncode}\n{made.stderr[-2000:]}")
     if name == "basin":
         return os.path.join(REPO, "config", "basin_fault.opts"), mesh
     scene = os.path.join(out, "layered_basin.opts")
@@ -98,21 +97,12 @@ def make_scene(name: str, out: str, size: float) -> tuple[str, str]:
 
 def run(tree: str, scene: str, mesh: str, out: str, ranks: int, extra: list, timeout: float) -> dict:
     """One pfault run of the checkout ``tree`` into ``out``: its figures (``ok`` False for a failed run)."""
-    env = mpi_env()
+    env = environment()
     env["PYTHONPATH"] = tree
-    cmd = command(["-m", "pfault", scene, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, "-pfault_figures",
-                   "false", *extra], ranks)
-    cpu0, load0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), os.getloadavg()[0], time.perf_counter()
-    with open(out + ".log", "w") as log:
-        try:
-            code = subprocess.run(cmd, cwd=tree, env=env, stdout=log, stderr=subprocess.STDOUT,
-                                  timeout=timeout).returncode
-        except subprocess.TimeoutExpired:
-            code = -1
-    wall, cpu1 = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_CHILDREN)
-    s = read_summary(out) if code == 0 else None
-    rec = {"dir": out, "ok": bool(s and s["converged"]), "wall_s": wall, "load": (load0 + os.getloadavg()[0]) / 2,
-           "cpu_s": (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)}
+    done = run_logged(["-m", "pfault", scene, "-pfault_mesh_file", mesh, "-pfault_output_dir", out,
+                       "-pfault_figures", "false", *extra], ranks, out + ".log", timeout, cwd=tree, env=env)
+    s = read_summary(out) if done.code == 0 and not done.timed_out else None
+    rec = {"dir": out, "ok": bool(s and s["converged"]), "wall_s": done.wall, "load": done.load, "cpu_s": done.cpu}
     if s is None:
         return rec
     steps = [r for r in s["steps"] if not r.get("initial")]

@@ -47,7 +47,7 @@ sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
 from frictional_crack_mesh import make_crack_mesh, read_pfault_slip, slip_errors  # noqa: E402
 from pfault.post.rundir import read_summary  # noqa: E402
-from studies.run import run_captured  # noqa: E402
+from pfault.tools.runs import run_captured  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "frictional_crack.opts")
 # the scene's values (config/frictional_crack.opts)
@@ -61,7 +61,7 @@ GETFEM_CONTACTS = ("nodal", "integral-p0", "integral-p1")
 def run_pfault(mesh, out, ranks):
     t0 = time.perf_counter()
     proc = run_captured(["-m", "pfault", SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out,
-                         "-pfault_figures", "false"], ranks)
+                         "-pfault_figures", "false"], ranks, cwd=REPO)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"pfault exited {proc.returncode}:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")

@@ -18,7 +18,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from studies.run import REPO, mpi_env  # noqa: E402
+from pfault.tools.runs import environment  # noqa: E402
+from studies import REPO  # noqa: E402
 from pfault.tools.runs import Run, run_pfault  # noqa: E402
 
 STATIONS = "name,x,y,z\nCREST,501000,3502500,0\nWEST,500500,3502500,0\nEAST,501500,3502500,0\n"
@@ -29,7 +30,7 @@ GIS = {"pfault_crs": "EPSG:32650", "pfault_start_date": "2015-01-01"}
 def one(out, overrides, ranks, gis):
     t0 = time.perf_counter()
     r = run_pfault(Run("config/wuxi.opts", out, overrides, ranks=ranks, gis=gis, timeout=1800), cwd=REPO,
-                   env=mpi_env())
+                   env=environment())
     wall = time.perf_counter() - t0
     if not r.ok:
         sys.exit(f"run failed: {r.error}")

@@ -33,7 +33,7 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 from pfault.post import figures as fg  # noqa: E402
-from studies.run import command, mpi_env, run_logged  # noqa: E402
+from pfault.tools.runs import run_captured, run_logged  # noqa: E402
 
 YEAR = fg.YEAR
 # scene: options file, fault, {material: drawdown (m) at the end}, end (years, one step a year)
@@ -46,9 +46,10 @@ def scene_options(name: str, args: argparse.Namespace) -> list[str]:
     if name == "aquifer":
         msh = os.path.join(args.out, f"faulted_aquifer_{args.aquifer_size:g}.msh")
         if not os.path.exists(msh):
-            import subprocess
-            subprocess.run(command(["benchmarks/faulted_aquifer_mesh.py", msh, "--size-factor",
-                                    f"{args.aquifer_size:g}"]), cwd=REPO, env=mpi_env(), check=True)
+            made = run_captured(["benchmarks/faulted_aquifer_mesh.py", msh, "--size-factor", f"{args.aquifer_size:g}"],
+                                cwd=REPO)
+            if made.returncode != 0:
+                raise SystemExit(f"faulted_aquifer_mesh.py: exit {made.returncode}\n{made.stderr[-2000:]}")
         return ["-pfault_mesh_file", msh]
     return ["-pfault_mesh_size_factor", f"{args.wuxi_size:g}"]
 
@@ -58,7 +59,7 @@ def run(name: str, tag: str, options: list[str], args: argparse.Namespace) -> di
     out = os.path.join(args.out, f"{name}-{tag}")
     cmd = ["-m", "pfault", SCENES[name][0], "-pfault_output_dir", out, *scene_options(name, args), *options,
            *args.extra]
-    log = run_logged(cmd, args.ranks, out + ".log", args.timeout)
+    log = run_logged(cmd, args.ranks, out + ".log", args.timeout, cwd=REPO)
     print(f"{name} {tag}: {log.command}\n  exit {log.code}, {log.wall:.1f} s end to end, load {log.load:.2f}",
           flush=True)
     if log.code != 0:

@@ -13,14 +13,15 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
 from pfault.post import rundir  # noqa: E402
 from pfault.post.rundir import read_summary  # noqa: E402
+from pfault.tools.runs import run_captured, shown  # noqa: E402
 
 FISSURE = "config/hard/fissure_box.opts"
 MESHES = {"h": ("16,8,10", 8.0e6 / math.sqrt(62.5)), "h/2": ("32,16,20", 8.0e6 / math.sqrt(15.625))}
@@ -30,11 +31,10 @@ ONE_STEP = ["-pfault_time_steps", "1", "-pfault_time_end", "1*year", "-pfault_ma
 
 
 def run(out, ranks, extra):
-    cmd = ["mpirun", "-n", str(ranks), sys.executable, "-m", "pfault", FISSURE, "-pfault_output_dir", out,
-           *ONE_STEP, *extra]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
+    proc = run_captured(["-m", "pfault", FISSURE, "-pfault_output_dir", out, *ONE_STEP, *extra], ranks, cwd=REPO,
+                        timeout=1800)
     if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+        raise RuntimeError(f"{shown(proc.args)}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
     f = rundir.read_fault(out).cell_data
     s = read_summary(out)
     return np.column_stack([f["opening"], f["slip"]]), max(st["newton_its"] for st in s["steps"] if st["time_s"] > 0)

@@ -25,14 +25,15 @@ sys.path.insert(0, REPO)
 sys.path.insert(0, os.path.join(REPO, "tests", "scripts"))
 from penny_mesh import crack_errors, make_penny_mesh  # noqa: E402
 from pfault.post.rundir import read_summary  # noqa: E402
-from studies.run import run_captured  # noqa: E402
+from pfault.tools.runs import run_captured  # noqa: E402
 
 SCENE = os.path.join(REPO, "config", "penny_crack.opts")
 
 
 def run_pfault(mesh, out, ranks, extra=()):
     t0 = time.perf_counter()
-    proc = run_captured(["-m", "pfault", SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *extra], ranks)
+    proc = run_captured(["-m", "pfault", SCENE, "-pfault_mesh_file", mesh, "-pfault_output_dir", out, *extra], ranks,
+                        cwd=REPO)
     return proc, read_summary(out), time.perf_counter() - t0
 
 

@@ -23,7 +23,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from pfault.post.rundir import read_summary  # noqa: E402
-from studies.run import run_captured  # noqa: E402
+from pfault.tools.runs import run_captured  # noqa: E402
 
 SCENE = "config/queretaro_calibrated.opts"
 MAXIMA = ("max_fault_slip_m", "max_fault_opening_m", "max_subsidence_m")
@@ -40,7 +40,7 @@ def run(size_factor, solver, ranks, out, extra, scene=SCENE, name=None):
     cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = run_captured(["-m", "pfault", scene, *size, "-pfault_solver", solver, "-pfault_output_dir", path,
-                         "-pfault_figures", "false", *extra], ranks)
+                         "-pfault_figures", "false", *extra], ranks, cwd=ROOT)
     wall = time.perf_counter() - t0
     cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     # CPU time of the ranks (user + system, every rank): on a shared machine less sensitive to the load

@@ -25,7 +25,7 @@ sys.path.insert(0, REPO)
 from pfault.post import fissures, meshes, rundir  # noqa: E402
 from pfault.post.rundir import read_summary  # noqa: E402
 from pfault.units import YEAR  # noqa: E402
-from studies.run import run_logged  # noqa: E402
+from pfault.tools.runs import run_logged  # noqa: E402
 
 SCENES = {"plain": "config/wuxi.opts", "fissure": "config/wuxi_fissure.opts"}
 MAX_WALL_RATIO = 1.5
@@ -37,7 +37,7 @@ def run(name: str, args: argparse.Namespace) -> dict | None:
     out = os.path.join(args.out, name)
     cmd = ["-m", "pfault", SCENES[name], "-pfault_output_dir", out, "-pfault_mesh_size_factor",
            str(args.size_factor), "-pfault_figures", "true", *args.extra]
-    log = run_logged(cmd, args.ranks, os.path.join(args.out, f"{name}.log"), args.timeout)
+    log = run_logged(cmd, args.ranks, os.path.join(args.out, f"{name}.log"), args.timeout, cwd=REPO)
     summary = read_summary(out)
     print(f"{name}: {log.command}\n  exit {log.code}{' (timed out)' if log.timed_out else ''}, "
           f"{log.wall:.1f} s end to end, load {log.load:.2f}", flush=True)

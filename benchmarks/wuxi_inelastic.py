@@ -33,7 +33,7 @@ from pfault.physics.elasticity import tet_geometry  # noqa: E402
 from pfault.post.rundir import read_summary  # noqa: E402
 from pfault.soils.columns import segments  # noqa: E402
 from studies import soil_column as sc  # noqa: E402
-from studies.run import run_logged  # noqa: E402
+from pfault.tools.runs import run_logged  # noqa: E402
 
 SCENES = {"linear": "config/wuxi.opts", "inelastic": "config/wuxi_inelastic.opts",
           "recovery": "config/wuxi_recovery.opts"}
@@ -50,7 +50,7 @@ def run(name: str, args: argparse.Namespace, tag: str) -> dict | None:
     out = os.path.join(args.out, tag)
     cmd = ["-m", "pfault", SCENES[name], "-pfault_output_dir", out, "-pfault_mesh_size_factor",
            str(args.size_factor), "-pfault_figures", "false", *args.extra]
-    log = run_logged(cmd, args.ranks, os.path.join(args.out, f"{tag}.log"), args.timeout)
+    log = run_logged(cmd, args.ranks, os.path.join(args.out, f"{tag}.log"), args.timeout, cwd=REPO)
     summary = read_summary(out)
     print(f"{tag}: exit {log.code}, {log.wall:.1f} s wall, {log.cpu:.1f} s CPU, load {log.load:.1f}", flush=True)
     if log.code != 0 or summary is None:

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 
 from pfault.errors import EXIT_INPUT, EXIT_USAGE, Interrupted, StopSignal, as_pfault_error
 from pfault.optionsfile import (COMMAND_LINE, ArgumentError, Entry, _entry_or_include, is_option_name,
-                                petsc_arguments, read_options_file)
+                                petsc_arguments, read_options_file, replace_database)
 
 USAGE = ("usage: mpirun -n N python -m pfault SCENE.opts [-option value ...]   (python -m pfault -help lists the "
          "options and exit codes)")
@@ -120,16 +120,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         _say(f"pfault: error: {exc}")
         return exc.code
     rest = ["-help" if a in ("--help", "-h") else a for a in rest]
+    if not start_petsc(argv[0], scene, petsc_arguments(scene, rest)):
+        return EXIT_INPUT
+    from pfault.cli import main as run_scene      # imports PETSc: after petsc4py.init
+    return run_scene(scene, argv)
+
+
+def start_petsc(program: str, scene: str, args: list[str]) -> bool:
+    """Starts PETSc with ``args`` (the scene's options, then the command line's); False (the error said) if it
+    cannot. In a process whose PETSc runs already (a driver running scenes one after another, the test suite)
+    the options database is replaced by ``args`` instead, so that no option of an earlier run carries over;
+    the options PETSc reads only when it starts or ends (-log_view, -malloc_debug, ...) do nothing there."""
+    if "petsc4py.PETSc" in sys.modules:
+        from petsc4py import PETSc
+        replace_database(PETSc.Options(), args)
+        return True
     import petsc4py
-    petsc4py.init([argv[0]] + petsc_arguments(scene, rest))
+    petsc4py.init([program] + args)
     try:
         from petsc4py import PETSc  # noqa: F401  (PetscInitialize reads the options here)
     except Exception as exc:  # noqa: BLE001
         _say(f"pfault: error: PETSc could not start with the options of {scene} and the command line "
              f"({exc}; PETSc's message is above)")
-        return EXIT_INPUT
-    from pfault.cli import main as run_scene      # imports PETSc: after petsc4py.init
-    return run_scene(scene, argv)
+        return False
+    return True
 
 
 def _stop_signal(signum, frame):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import Any
 
 from pfault.errors import EXIT_INPUT
 from pfault.paths import file_problem
@@ -145,3 +146,16 @@ def petsc_arguments(scene: str, rest: list[str]) -> list[str]:
 
 def _flatten(entries):
     return [a for e in entries for a in ([f"-{e.name}"] if e.value is None else [f"-{e.name}", e.value])]
+
+
+def replace_database(options: Any, args: list[str]) -> None:
+    """Replaces every option of a running PETSc's database (``PETSc.Options()``) by those of ``args`` (as
+    petsc_arguments gives them), as PETSc's start reads them from the command line: for a process that runs
+    one scene after another, where no option of an earlier run may carry over."""
+    for name in options.getAll():
+        options.delValue("-" + name)
+    i = 0
+    while i < len(args):
+        value = args[i + 1] if i + 1 < len(args) and not is_option_name(args[i + 1]) else None
+        options.setValue(args[i], value)
+        i += 1 if value is None else 2

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what pfault needs on Debian 12, once: Debian's PETSc stack, OpenBLAS, and a venv
 # (system site packages) holding pfault (editable) and what it takes from PyPI: gmsh, meshio, scipy (spatial
-# fields, least squares of python -m pfault.calibrate), pytest, matplotlib (figures), flopy (MODFLOW head and grid
+# fields, least squares of python -m pfault.calibrate), pytest and pytest-xdist, matplotlib (figures), flopy (MODFLOW head and grid
 # files), h5netcdf (the InSAR raster, NetCDF-4 through h5py), pyproj (-pfault_crs: PROJ's coordinate reference
 # systems), rasterio (GeoTIFFs), netCDF4 (the tests read the raster back with the netCDF library), xarray (the tests
 # write MODFLOW 6 NetCDF heads) and pyemu (the tests read the calibration's PEST++ files back); Debian's GDAL
@@ -28,8 +28,8 @@ if [ ! -x .venv/bin/python ]; then
   echo "setup: creating .venv (with system site packages: Debian's petsc4py, mpi4py, numpy, h5py)"
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
-PYPI="gmsh meshio scipy>=1.10,<1.12 pytest matplotlib flopy h5netcdf netCDF4 pyemu pyproj>=3.6 rasterio>=1.3 xarray"
-if ! .venv/bin/python -c "import gmsh, meshio, scipy, pytest, matplotlib, flopy, h5netcdf, netCDF4, pyemu, pyproj, rasterio, xarray" >/dev/null 2>&1; then
+PYPI="gmsh meshio scipy>=1.10,<1.12 pytest pytest-xdist matplotlib flopy h5netcdf netCDF4 pyemu pyproj>=3.6 rasterio>=1.3 xarray"
+if ! .venv/bin/python -c "import gmsh, meshio, scipy, pytest, xdist, matplotlib, flopy, h5netcdf, netCDF4, pyemu, pyproj, rasterio, xarray" >/dev/null 2>&1; then
   echo "setup: installing $PYPI into .venv"
   # numpy stays Debian's (petsc4py is compiled against it): pinned on the same pip command; scipy held to the
   # series tested with Debian 12's numpy 1.24 (1.10-1.11; scipy 1.16 and later cannot install beside it)

@@ -3,6 +3,11 @@ and write reports under runs/): the two case studies of Franceschini et al. (Pro
 paper (``casestudies``), the contact solver's hard cases (``hard_cases``), accuracy against cost on
 problems with a known answer (``accuracy``), and the soil law with memory against the 1-D compression-index law,
 MODFLOW 6 CSUB's no-delay interbeds and Modified Cam-Clay (``soil_column``, ``soil_laws``: NumPy only, no run).
-``run`` starts the runs (mpirun, environment, logs, timeouts) for them, the benchmarks and the tests.
+Their runs are started by pfault.tools.runs (mpirun, environment, logs, timeouts), as the benchmarks' and the
+tests' are.
 
 Run them from the repository root: ``python -m studies.casestudies``, or through benchmarks/*.py."""
+
+import os
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))      # the repository's root

@@ -58,7 +58,9 @@ import numpy as np
 
 from pfault.post.rundir import read_summary
 
-from .run import REPO, cpu_model, run_logged
+from pfault.tools.runs import cpu_model, run_logged
+
+from . import REPO
 
 SCRIPTS = os.path.join(REPO, "tests", "scripts")
 LEVELS = (0.10, 0.05, 0.01)             # error levels of the "cheapest setting" table
@@ -135,7 +137,7 @@ class Study:
 # ------------------------------------------------------------------------------------------------------
 def run_command(args, rundir, ranks, timeout=TIMEOUT):
     """Runs ``python ARGS`` (under mpirun for ranks > 1) from the repository root, logging to rundir/stdout.txt."""
-    return run_logged(args, ranks, os.path.join(rundir, "stdout.txt"), timeout)
+    return run_logged(args, ranks, os.path.join(rundir, "stdout.txt"), timeout, cwd=REPO)
 
 
 def run_pfault(study, problem, name, scene, extra=()):

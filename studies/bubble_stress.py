@@ -19,13 +19,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from studies.run import REPO, command, mpi_env, run_captured  # noqa: E402
+from pfault.tools.runs import environment, run_captured  # noqa: E402
+from studies import REPO  # noqa: E402
 
 GLUE = "1e12"       # Pa of cohesion: no face slips or opens
 CASES = {
@@ -57,11 +57,11 @@ def run(scene: str, outdir: str, extra: list, pythonpath: str | None = None) -> 
             *extra]
     if pythonpath:
         # python -m puts the working directory first on the import path: run from the other checkout
-        env = mpi_env()
+        env = environment()
         env["PYTHONPATH"] = os.pathsep.join([pythonpath, env["PYTHONPATH"]])
-        proc = subprocess.run(command(args), cwd=pythonpath, env=env, capture_output=True, text=True, timeout=1200)
+        proc = run_captured(args, 1, cwd=pythonpath, env=env, timeout=1200)
     else:
-        proc = run_captured(args, 1, timeout=1200)
+        proc = run_captured(args, 1, timeout=1200, cwd=REPO)
     if proc.returncode != 0:
         raise SystemExit(f"{scene} {' '.join(extra)}: exit {proc.returncode}\n{proc.stdout[-2000:]}"
                          f"{proc.stderr[-2000:]}")

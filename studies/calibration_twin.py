@@ -7,15 +7,13 @@ from __future__ import annotations
 
 import csv
 import os
-import subprocess
-import sys
 
 import numpy as np
 
 from pfault.post.rundir import read_station_series
-from pfault.tools.runs import Run, run_pfault
+from pfault.tools.runs import Run, run_captured, run_pfault
 
-from .run import REPO, mpi_env
+from . import REPO
 
 SCENE = "config/twin/twin.opts"
 TRUE = {"E_clay": 5e6, "E_sand": 40e6, "Q": 5e-3}          # Pa, Pa, m**3/s
@@ -50,7 +48,7 @@ def true_overrides():
 def write_observations(path, run_dir, days, noise=True):
     """Runs the scene at the true values and writes its station displacements at `days`, with noise unless
     told (sigma is 2 % of each true value either way)."""
-    result = run_pfault(Run(SCENE, run_dir, true_overrides(), timeout=RUN_TIMEOUT), cwd=REPO, env=mpi_env())
+    result = run_pfault(Run(SCENE, run_dir, true_overrides(), timeout=RUN_TIMEOUT), cwd=REPO, env=None)
     assert result.ok, result.error
     series = read_station_series(run_dir)
     rng = np.random.default_rng(SEED)
@@ -76,6 +74,6 @@ def calibrate(workdir, days, workers=2, noise=True, extra=(), timeout=900):
     params, obs = os.path.join(workdir, "parameters.csv"), os.path.join(workdir, "observations.csv")
     write_parameters(params)
     write_observations(obs, os.path.join(workdir, "truth"), days, noise)
-    cmd = [sys.executable, "-m", "pfault.calibrate", SCENE, "--parameters", params, "--observations", obs,
-           "--workers", str(workers), "--output", os.path.join(workdir, "fit"), "--timeout", str(RUN_TIMEOUT), *extra]
-    return subprocess.run(cmd, cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=timeout)
+    args = ["-m", "pfault.calibrate", SCENE, "--parameters", params, "--observations", obs,
+            "--workers", str(workers), "--output", os.path.join(workdir, "fit"), "--timeout", str(RUN_TIMEOUT), *extra]
+    return run_captured(args, cwd=REPO, timeout=timeout)

@@ -30,7 +30,9 @@ import time
 from pfault.post import figures, meshes, rundir
 from pfault.units import YEAR
 
-from .run import REPO, command, cpu_model, run_logged, shown
+from pfault.tools.runs import command, cpu_model, run_logged, shown
+
+from . import REPO
 
 CASES = {
     "wuxi": "config/wuxi.opts",
@@ -91,7 +93,7 @@ def run_case(case, ranks=2, solver="mumps", size_factor=1.0, extra=(), timeout=7
         path = os.path.join(REPO, out, stale)
         if os.path.exists(path):
             os.remove(path)
-    done = run_logged(["-m", "pfault", *args], ranks, os.path.join(REPO, out, "stdout.txt"), timeout)
+    done = run_logged(["-m", "pfault", *args], ranks, os.path.join(REPO, out, "stdout.txt"), timeout, cwd=REPO)
     rec = {"case": case, "run": name, "tag": tag, "extra": list(extra), "command": done.command, "ranks": ranks,
            "solver": solver, "size_factor": float(size_factor), "exit_code": done.code,
            "wall_end_to_end_s": done.wall, "cpu_s": done.cpu, "load_avg_1min_mean": done.load,

@@ -29,13 +29,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from studies.run import run_logged  # noqa: E402
+from pfault.tools.runs import run_captured, run_logged  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RUNS = os.path.join(ROOT, "runs", "fault_convergence")
@@ -90,7 +89,9 @@ def _mesh(args):
     path = os.path.join(RUNS, "meshes", name)
     if not os.path.exists(path):
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        subprocess.run([sys.executable, MESHER, path, *args], check=True, cwd=ROOT)
+        made = run_captured([MESHER, path, *args], cwd=ROOT)
+        if made.returncode != 0:
+            raise SystemExit(f"{MESHER}: exit {made.returncode}\n{made.stderr[-2000:]}")
     return path
 
 
@@ -105,9 +106,9 @@ def run(name):
 
 
 def run_case(name, args, ranks, out):
-    """Run ``python ARGS`` on ``ranks`` ranks from the repository's root (studies.run.run_logged) with its output in
+    """Run ``python ARGS`` on ``ranks`` ranks from the repository's root (pfault.tools.runs.run_logged) with its output in
     ``out``/stdout.txt; ``out``/case.json records the command, its exit code and wall time."""
-    done = run_logged(args, ranks, os.path.join(out, "stdout.txt"), TIMEOUT)
+    done = run_logged(args, ranks, os.path.join(out, "stdout.txt"), TIMEOUT, cwd=ROOT)
     with open(os.path.join(out, "case.json"), "w") as f:
         json.dump({"command": done.command, "exit_code": done.code, "wall_s": done.wall}, f)
     print(f"{name}: exit {done.code}, {done.wall:.0f} s", flush=True)

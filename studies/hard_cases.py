@@ -41,7 +41,9 @@ from pfault.post import rundir
 from pfault.post.rundir import read_summary
 from pfault.units import YEAR
 
-from .run import REPO, command, cpu_model, run_logged, shown
+from pfault.tools.runs import command, cpu_model, run_logged, shown
+
+from . import REPO
 
 RUNS_DIR = os.path.join("runs", "hard_cases")
 EXIT_OK, EXIT_FAILED = 0, 1
@@ -557,7 +559,7 @@ def run_case(case, runs_dir, timeout=1800.0):
             os.remove(os.path.join(REPO, out, stale))
     args = ["-m", "pfault", *case.args(out)]
     print(f"hard cases: {case.name}: {shown(command(args, case.ranks))}", flush=True)
-    done = run_logged(args, case.ranks, os.path.join(REPO, out, "stdout.txt"), timeout)
+    done = run_logged(args, case.ranks, os.path.join(REPO, out, "stdout.txt"), timeout, cwd=REPO)
     rc = "timeout" if done.timed_out else done.code
     rec = {"case": case.name, "command": done.command, "ranks": case.ranks, "exit_code": rc,
            "wall_end_to_end_s": done.wall, "load_avg_1min_after": os.getloadavg()[0],

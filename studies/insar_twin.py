@@ -10,17 +10,15 @@ from __future__ import annotations
 import csv
 import datetime as dt
 import os
-import subprocess
-import sys
 
 import numpy as np
 from pyproj import CRS
 
 from pfault.tools.insar_fit import _at
 from pfault.tools.insar_write import write_opera
-from pfault.tools.runs import Run, run_pfault
+from pfault.tools.runs import Run, run_captured, run_pfault
 
-from .run import REPO, mpi_env
+from . import REPO
 
 SCENE = "config/site_example/site.opts"
 CRS_SITE = CRS.from_epsg(32650)
@@ -61,7 +59,7 @@ def truth(workdir):
     overrides = {OPTIONS[k][1:]: repr(v) for k, v in TRUE.items()}
     overrides["pfault_insar_grid"] = template
     out = os.path.join(workdir, "truth")
-    result = run_pfault(Run(SCENE, out, overrides, timeout=RUN_TIMEOUT), cwd=REPO, env=mpi_env())
+    result = run_pfault(Run(SCENE, out, overrides, timeout=RUN_TIMEOUT), cwd=REPO, env=None)
     assert result.ok, result.error
     from pfault.io.insar import read_netcdf
     run = read_netcdf(os.path.join(out, "insar_los.nc"))
@@ -98,8 +96,8 @@ def calibrate(workdir, workers=2, noise=True, timeout=900):
     params = os.path.join(workdir, "parameters.csv")
     write_parameters(params)
     product, offsets = observed(workdir, noise)
-    cmd = [sys.executable, "-m", "pfault.calibrate", SCENE, "--parameters", params, "--insar", product,
-           "--insar-sigma", f"{SIGMA}", "--workers", str(workers), "--output", os.path.join(workdir, "fit"),
-           "--timeout", str(RUN_TIMEOUT)]
-    proc = subprocess.run(cmd, cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=timeout)
+    args = ["-m", "pfault.calibrate", SCENE, "--parameters", params, "--insar", product,
+            "--insar-sigma", f"{SIGMA}", "--workers", str(workers), "--output", os.path.join(workdir, "fit"),
+            "--timeout", str(RUN_TIMEOUT)]
+    proc = run_captured(args, cwd=REPO, timeout=timeout)
     return proc, offsets

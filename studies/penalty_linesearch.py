@@ -21,7 +21,8 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from studies.run import REPO, run_captured  # noqa: E402
+from pfault.tools.runs import run_captured  # noqa: E402
+from studies import REPO  # noqa: E402
 
 SCENES = {
     # clay E = 8 MPa on 12.5 m x 10 m halves
@@ -62,7 +63,7 @@ def basin_mesh(out: str) -> str:
     path = os.path.join(out, "basin_fault.msh")
     if not os.path.exists(path):
         os.makedirs(out, exist_ok=True)
-        proc = run_captured([os.path.join("benchmarks", "basin_fault_mesh.py"), path], 1, timeout=600)
+        proc = run_captured([os.path.join("benchmarks", "basin_fault_mesh.py"), path], 1, timeout=600, cwd=REPO)
         if proc.returncode != 0:
             raise SystemExit(f"basin_fault_mesh.py: exit {proc.returncode}\n{proc.stderr[-2000:]}")
     return path
@@ -83,7 +84,7 @@ def main() -> None:
             extra = ["-pfault_mesh_file", basin_mesh(a.out)] + extra
         t0 = time.perf_counter()
         proc = run_captured(["-m", "pfault", SCENES[scene][0], "-pfault_output_dir", out, "-pfault_figures",
-                             "false", *extra], 1, timeout=1800)
+                             "false", *extra], 1, timeout=1800, cwd=REPO)
         wall = time.perf_counter() - t0
         try:
             s = json.load(open(os.path.join(out, "summary.json")))

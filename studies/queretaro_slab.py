@@ -20,10 +20,11 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 
 import numpy as np
+
+from pfault.tools.runs import run_captured, run_logged
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RUNS = os.path.join(ROOT, "runs", "queretaro_slab")
@@ -68,8 +69,9 @@ def make_case(out, h, drawdown=DRAWDOWN):
     """The slab's mesh (element size h on the fault) and scene in directory out; returns the scene's path."""
     os.makedirs(out, exist_ok=True)
     mesh = os.path.join(out, "slab.msh")
-    subprocess.run([sys.executable, MESHER, mesh, "--fault-size", str(h), *GEOMETRY], check=True,
-                   stdout=subprocess.DEVNULL)
+    made = run_captured([MESHER, mesh, "--fault-size", str(h), *GEOMETRY], cwd=ROOT)
+    if made.returncode != 0:
+        raise SystemExit(f"{MESHER}: exit {made.returncode}\n{made.stderr[-2000:]}")
     scene = os.path.join(out, "scene.opts")
     with open(scene, "w") as fh:
         fh.write(SCENE.format(mesh=mesh, drawdown=drawdown))
@@ -79,9 +81,9 @@ def make_case(out, h, drawdown=DRAWDOWN):
 def run(h, drawdown):
     out = _dir(h, drawdown)
     scene = make_case(out, h, drawdown)
-    with open(os.path.join(out, "stdout.txt"), "w") as log:
-        subprocess.run([sys.executable, "-m", "pfault", scene, "-pfault_output_dir", out], cwd=ROOT, stdout=log,
-                       stderr=subprocess.STDOUT, check=True)
+    done = run_logged(["-m", "pfault", scene, "-pfault_output_dir", out], 1, os.path.join(out, "stdout.txt"), cwd=ROOT)
+    if done.code != 0:
+        raise SystemExit(f"{scene}: exit {done.code}; see {done.log}")
 
 
 def measures(out, h):

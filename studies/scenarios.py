@@ -17,9 +17,10 @@ import argparse
 import csv
 import os
 import sys
-import time
 
-from .run import REPO, mpi_env, shown
+from pfault.tools.runs import run_logged
+
+from . import REPO
 
 SCENE, PLANS = "config/queretaro.opts", "config/queretaro_plans.opts"
 COMPARED = ("max_subsidence_m", "final_subsidence_m", "max_fault_opening_m", "max_fault_slip_m",
@@ -27,14 +28,12 @@ COMPARED = ("max_subsidence_m", "final_subsidence_m", "max_fault_opening_m", "ma
 
 
 def run_factor(factor: str, workers: int) -> tuple[dict, float, int]:
-    import subprocess
     out = os.path.join("runs", f"queretaro_plans-f{factor}")
-    cmd = [sys.executable, "-m", "pfault.scenarios", SCENE, PLANS, "--output", out, "--workers", str(workers),
-           "-pfault_mesh_size_factor", factor]
-    print(f"$ {shown(cmd)}", flush=True)
-    t0 = time.perf_counter()
-    code = subprocess.run(cmd, cwd=REPO, env=mpi_env()).returncode
-    wall = time.perf_counter() - t0
+    args = ["-m", "pfault.scenarios", SCENE, PLANS, "--output", out, "--workers", str(workers),
+            "-pfault_mesh_size_factor", factor]
+    done = run_logged(args, 1, os.path.join(REPO, out + ".log"), cwd=REPO)
+    print(f"$ {done.command}  (log {out}.log)", flush=True)
+    code, wall = done.code, done.wall
     with open(os.path.join(REPO, out, "scenarios.csv"), newline="") as fh:
         rows = {r["plan"]: r for r in csv.DictReader(fh)}
     return rows, wall, code

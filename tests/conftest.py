@@ -1,21 +1,32 @@
-"""Shared helpers: run pfault (or a script) on 1 rank directly or on N ranks under mpirun, with timeouts.
+"""Shared helpers: the scenes the tests run most, runs of pfault and of tests/scripts/ (every run under a
+timeout), and the comparison of two run directories.
 
-They are studies/run.py's: the repository root goes first on the import path so that the tests import the
-studies (studies/) beside the package."""
+pfault's command line runs in this process on one rank and in a set of MPI workers started once on two
+(tests/inprocess.py), where MPI start-up is not what a test is about; anything else is a process started by
+pfault.tools.runs (the runner of the studies and the benchmarks too). A process that runs tests starts PETSc once,
+with no options, before a test module imports it (pytest_configure); the process that only shares the tests out
+between pytest-xdist's workers does not start it (its MPI would be inherited by the workers it starts, and the
+mpirun of a worker's run would fail). The repository root goes first on the import path so that the tests import
+the studies (studies/) beside the package."""
 
+import fcntl
+import hashlib
 import json
 import os
+import shutil
+import subprocess
 import sys
 
 import numpy as np
+import petsc4py
 import pytest
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
+from inprocess import RUNS_HERE, Workers, can_run_here, run_here  # noqa: E402
 from pfault.post.rundir import read_fields, read_summary  # noqa: E402
-from studies.run import command, run_captured  # noqa: E402,F401  (command: tests that start runs)
-from studies.run import mpi_env as study_mpi_env  # noqa: E402
+from pfault.tools.runs import command, environment, run_captured  # noqa: E402,F401  (command, run_captured: tests)
 
 PY = sys.executable
 
@@ -63,23 +74,72 @@ def flow_box(tmp_path):
 
 
 def mpi_env():
-    return study_mpi_env(oversubscribe=True)
+    """The tests' runs' environment: pfault.tools.runs.environment, more ranks than cores allowed, and ranks that
+    yield their core while they wait for a message: the suite's workers run side by side on the cores, and a rank
+    spinning in a receive would take the core its partner needs."""
+    env = environment(oversubscribe=True)
+    env["OMPI_MCA_mpi_yield_when_idle"] = "1"
+    return env
 
 
-def run(args, ranks=1, timeout=TIMEOUT, check=True):
-    proc = run_captured(args, ranks, timeout=timeout, env=mpi_env())
+WORKERS = Workers(mpi_env(), REPO)      # the MPI workers of the session's 2-rank runs (tests/inprocess.py)
+
+
+def run(args, ranks=1, timeout=TIMEOUT, check=True, cwd=REPO, here=True):
+    """``python ARGS`` on ``ranks`` ranks from ``cwd`` (the repository's root); the CompletedProcess, checked to
+    exit 0 unless ``check`` is False. pfault's command line runs in this process on one rank and in the MPI
+    workers on two (tests/inprocess.py); anything else, and every run with ``here=False``, is a process (under
+    mpirun on more ranks). A run past ``timeout`` s fails the test."""
+    try:
+        if ranks == 1 and here and can_run_here(args):
+            proc = run_here(args, str(cwd), timeout)
+        elif ranks == 2 and here and can_run_here(args):
+            proc = WORKERS.run(args, ranks, str(cwd), timeout)
+        else:
+            proc = run_captured(args, ranks, cwd=cwd, env=mpi_env(), timeout=timeout)
+    except subprocess.TimeoutExpired as exc:
+        pytest.fail(f"{' '.join(map(str, args))} on {ranks} rank(s) did not end within {timeout} s\n"
+                    f"stdout:\n{(exc.stdout or '')[-4000:]}\nstderr:\n{(exc.stderr or '')[-4000:]}")
     if check and proc.returncode != 0:
         raise AssertionError(f"{' '.join(args)} on {ranks} rank(s) exited {proc.returncode}\n"
                              f"stdout:\n{proc.stdout[-4000:]}\nstderr:\n{proc.stderr[-4000:]}")
     return proc
 
 
-def run_scene(scene, outdir, ranks=1, extra=(), check=True):
-    # no PNG figures unless a test asks for them (-pfault_figures true): matplotlib adds ~3 s to every run
+def run_scene(scene, outdir, ranks=1, extra=(), check=True, here=True):
+    """A run of ``scene`` into ``outdir`` (no PNG figures unless ``extra`` asks for them: matplotlib adds ~3 s to
+    every run); (CompletedProcess, its summary.json or None)."""
     figures = [] if "-pfault_figures" in extra else ["-pfault_figures", "false"]
     proc = run(["-m", "pfault", scene, "-pfault_output_dir", str(outdir), *figures, *extra], ranks=ranks,
-               check=check)
+               check=check, here=here)
     return proc, read_summary(outdir)
+
+
+@pytest.fixture(scope="session")
+def shared_run(tmp_path_factory):
+    """A run made once for every test, in any module and on any of the suite's workers, that asks for the same
+    scene, ranks and options: ``shared_run(scene, ranks=1, extra=())`` -> (summary, output directory). Its
+    directory is read, never written to (a test that continues or changes a run copies it first). The workers
+    share the session's directory; a lock file per run makes one of them make it while the others wait."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+
+    def get(scene, ranks=1, extra=()):
+        extra = tuple(map(str, extra))
+        key = hashlib.sha256(repr((scene, ranks, extra)).encode()).hexdigest()[:12]
+        out = root / f"shared-{os.path.splitext(os.path.basename(scene))[0]}-r{ranks}-{key}"
+        with open(f"{out}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                if not os.path.exists(f"{out}.done"):
+                    shutil.rmtree(out, ignore_errors=True)
+                    run_scene(scene, out, ranks=ranks, extra=extra)
+                    open(f"{out}.done", "w").close()
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+        return read_summary(out), out
+    return get
 
 
 def run_script(script, ranks=1, args=()):
@@ -192,3 +252,21 @@ def compare_runs(ref_dir, other_dir, rtol):
     assert [r["step"] for r in sb["steps"]] == [r["step"] for r in sa["steps"]]
     assert sb["completed_steps"] == sa["completed_steps"]
     return worst
+
+
+def pytest_configure(config):
+    """PETSc started with no options (pytest's arguments are not PETSc's) in a process that runs tests."""
+    shares_out = getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput")
+    if not shares_out:
+        petsc4py.init([sys.argv[0]])
+
+
+def pytest_sessionfinish(session):
+    WORKERS.close()
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    if getattr(config.option, "numprocesses", None):
+        return                  # (the counts are the workers')
+    terminalreporter.write_line(f"pfault tests: {RUNS_HERE[0]} runs of pfault in the test process, {RUNS_HERE[1]} in "
+                                "MPI workers")

@@ -1,23 +1,21 @@
 """Catalogue of bad inputs and faults, at 1 and 2 ranks.
 
 Each case asserts the exit code, the one line that names the problem (printed once, without a traceback
-unless it is a bug), that every rank ends (mpirun returns before the timeout only when all its ranks have
-ended; the whole process group is killed otherwise) and what is on disk afterwards: no output directory,
-or the content a previous run left there untouched.
+unless it is a bug), that every rank ends (a run that has not ended within its timeout fails its test: on 2 ranks
+the MPI workers answer only when every rank has ended the run, or the job aborted) and what is on disk
+afterwards: no output directory, or the content a previous run left there untouched.
 """
 
-import functools
 import json
 import os
-import signal
-import subprocess
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 import pytest
+from petsc4py import PETSc
 
-from conftest import FLOW_BOX, OEDOMETER, PY, REPO, TWO_BLOCKS, mpi_env
+from conftest import FLOW_BOX, OEDOMETER, REPO, TWO_BLOCKS, run
 
 OED = OEDOMETER
 OED_FILE = os.path.join(REPO, OEDOMETER)      # included from files in tmp (an include is relative to its file)
@@ -27,18 +25,10 @@ FREE_SIDES = ["-pfault_bc_xmin_type", "free", "-pfault_bc_xmax_type", "free", "-
 
 
 def run_pfault(args, ranks, timeout=TIMEOUT):
-    """Run ``python ARGS`` on 1 rank or under mpirun; kill the whole process group on timeout."""
-    cmd = [PY] + args if ranks == 1 else ["mpirun", "-n", str(ranks), "--oversubscribe", PY] + args
-    proc = subprocess.Popen(cmd, cwd=REPO, env=mpi_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        out, err = proc.communicate()
-        pytest.fail(f"{' '.join(args)} on {ranks} rank(s) did not end within {timeout} s\n{out[-2000:]}\n"
-                    f"{err[-2000:]}")
-    return proc.returncode, out, err
+    """``python ARGS`` on ``ranks`` ranks (conftest.run: pfault's command line in this process or the MPI
+    workers, anything else a process); (exit code, stdout, stderr). A run past ``timeout`` s fails the test."""
+    proc = run(args, ranks=ranks, timeout=timeout, check=False)
+    return proc.returncode, proc.stdout, proc.stderr
 
 
 def write(path, text):
@@ -93,13 +83,9 @@ def include_loop(tmp, out, ranks):
     return ["-m", "pfault", write(tmp / "a.opts", f"-options_file {tmp / 'b.opts'}\n"), "-pfault_output_dir", str(out)]
 
 
-@functools.lru_cache(maxsize=None)
 def petsc_index_bytes():
-    """Size of PETSc's indices, asked of a separate process (MPI is not started in the test process)."""
-    code = ("import petsc4py, numpy; petsc4py.init([]); from petsc4py import PETSc; "
-            "print(numpy.dtype(PETSc.IntType).itemsize)")
-    return int(subprocess.run([PY, "-c", code], env=mpi_env(), capture_output=True, text=True, timeout=TIMEOUT,
-                              check=True).stdout.split()[-1])
+    """Size of PETSc's indices."""
+    return np.dtype(PETSc.IntType).itemsize
 
 
 BINARY = "\x7fELF\x02\x01\x01\x00\x00\x00" + "\x00" * 40

@@ -3,11 +3,10 @@ written; a forward run that fails at the start: exit 3 with that run's own error
 
 import csv
 import os
-import subprocess
 
 import pytest
 
-from conftest import PY, REPO, mpi_env
+from conftest import REPO, run
 
 SCENE = "config/twin/twin.opts"
 PARAMS = ("name,option,start,lower,upper,transform,value\n"
@@ -21,9 +20,8 @@ def calibrate(tmp_path, params=PARAMS, obs=OBS, scene=SCENE, extra=(), timeout=1
     p.write_text(params)
     o.write_text(obs)
     out = tmp_path / "fit"
-    proc = subprocess.run([PY, "-m", "pfault.calibrate", str(scene), "--parameters", str(p), "--observations",
-                           str(o), "--output", str(out), *extra], cwd=REPO, env=mpi_env(), capture_output=True,
-                          text=True, timeout=timeout)
+    proc = run(["-m", "pfault.calibrate", str(scene), "--parameters", str(p), "--observations",
+                str(o), "--output", str(out), *extra], timeout=timeout, check=False)
     return proc, out, str(p), str(o)
 
 

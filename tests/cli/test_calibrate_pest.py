@@ -10,7 +10,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import PY, REPO, mpi_env
+from conftest import mpi_env, REPO, run
 from pfault.tools.calibration import Problem
 from pfault.tools.calibration_input import read_observations, read_parameters, scene_facts
 from pfault.tools.runs import Run, run_pfault
@@ -29,9 +29,8 @@ def test_pest_files_run_the_same_model(tmp_path):
     p, o, pest = tmp_path / "params.csv", tmp_path / "obs.csv", tmp_path / "pest"
     p.write_text(PARAMS)
     o.write_text(OBS)
-    proc = subprocess.run([PY, "-m", "pfault.calibrate", SCENE, "--parameters", str(p), "--observations", str(o),
-                           "--pest", str(pest), "--max-iterations", "7"], cwd=REPO, env=mpi_env(),
-                          capture_output=True, text=True, timeout=60)
+    proc = run(["-m", "pfault.calibrate", SCENE, "--parameters", str(p), "--observations", str(o),
+                "--pest", str(pest), "--max-iterations", "7"], timeout=60, check=False)
     assert proc.returncode == 0, proc.stderr
     assert not os.path.exists(os.path.join(REPO, "runs", "calibrate_twin"))
     pst = pyemu.Pst(str(pest / "pfault.pst"))
@@ -44,9 +43,9 @@ def test_pest_files_run_the_same_model(tmp_path):
     assert np.allclose(pst.observation_data.obsval, [-0.02, -0.005, -0.013, -0.001, -0.001])
     # PEST's part: values into the template, the model command in the directory, the outputs read back
     pst.write_input_files(pst_path=str(pest))
-    run = subprocess.run(shlex.split(pst.model_command[0]), cwd=pest, env=mpi_env(), capture_output=True,
-                         text=True, timeout=120)
-    assert run.returncode == 0, run.stderr
+    model = subprocess.run(shlex.split(pst.model_command[0]), cwd=pest, env=mpi_env(), capture_output=True,
+                           text=True, timeout=120)
+    assert model.returncode == 0, model.stderr
     simulated = pyemu.pst_utils.process_output_files(pst, pst_path=str(pest)).loc[pst.obs_names, "obsval"].values
     # the built-in loop's values for the same parameters
     params = read_parameters(str(p))

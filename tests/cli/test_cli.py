@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from conftest import OEDOMETER, run, run_scene
+from conftest import OEDOMETER, REPO, read_summary, run, run_scene
 
 
 def test_help_lists_every_option():
@@ -93,17 +93,13 @@ def test_krylov_method_chosen_over_a_solver_file(tmp_path):
 def test_included_file_is_found_beside_the_including_file(tmp_path):
     """A scene including another by a relative path runs from any directory: the include is found beside the
     file that includes it (an absolute include as it is), and the later value wins as in PETSc."""
-    import subprocess
-    import sys
-    from conftest import REPO, mpi_env, read_summary
     scenes, elsewhere = tmp_path / "scenes", tmp_path / "elsewhere"
     scenes.mkdir()
     elsewhere.mkdir()
     (scenes / "base.opts").write_text(f"-options_file {os.path.join(REPO, OEDOMETER)}\n-pfault_time_steps 3\n")
     (scenes / "variant.opts").write_text("-options_file base.opts\n-pfault_time_steps 2\n")
-    proc = subprocess.run([sys.executable, "-m", "pfault", os.path.join("..", "scenes", "variant.opts"),
-                           "-pfault_output_dir", "out", "-pfault_figures", "false"], cwd=elsewhere, env=mpi_env(),
-                          capture_output=True, text=True, timeout=120)
+    proc = run(["-m", "pfault", os.path.join("..", "scenes", "variant.opts"),
+                "-pfault_output_dir", "out", "-pfault_figures", "false"], timeout=120, cwd=elsewhere, check=False)
     assert proc.returncode == 0, proc.stderr
     summary = read_summary(elsewhere / "out")
     assert [r["step"] for r in summary["steps"]] == [1, 2]
@@ -119,7 +115,6 @@ def test_included_file_is_found_beside_the_including_file(tmp_path):
 def test_shipped_variants_read_from_another_directory(tmp_path, monkeypatch, variant, base_scene, own_scene):
     """config's variants include their base scene beside them: from another working directory their options
     are the base's, then their own (the later -pfault_scene wins)."""
-    from conftest import REPO
     from pfault.optionsfile import petsc_arguments
     monkeypatch.chdir(tmp_path)
     args = petsc_arguments(os.path.join(REPO, "config", variant), ["-pfault_time_steps", "1"])
@@ -131,7 +126,6 @@ def test_shipped_variants_read_from_another_directory(tmp_path, monkeypatch, var
 def test_missing_include_names_where_it_was_looked_for(tmp_path, monkeypatch):
     """An include that is not beside its file but is in the working directory: the error says where it was
     looked for and how to write it."""
-    from conftest import REPO
     from pfault.optionsfile import ArgumentError, read_options_file
     monkeypatch.chdir(REPO)
     scene = tmp_path / "scene.opts"

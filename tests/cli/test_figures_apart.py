@@ -12,7 +12,9 @@ from pfault.post import figures_apart
 
 def test_run_ends_before_its_figures_drawn_apart(tmp_path):
     out = tmp_path / "oed"
-    proc = run(["-m", "pfault", OEDOMETER, "-pfault_output_dir", str(out)], ranks=2)
+    # a process of its own (here=False): the drawing must outlive mpirun and its ranks, which the MPI workers
+    # of the suite's other runs do not end
+    proc = run(["-m", "pfault", OEDOMETER, "-pfault_output_dir", str(out)], ranks=2, here=False)
     match = re.search(r"pfault: figures drawn apart by process (\d+) into (\S+) \(python -m pfault.post.figures",
                       proc.stdout)
     assert match and match.group(2) == str(out) and proc.stdout.count("figures drawn apart") == 1, proc.stdout

@@ -2,15 +2,14 @@
 no traceback, nothing written (pfault runs: no output directory; calibrations: no output directory)."""
 
 import datetime as dt
-import os
-import subprocess
 
 import h5py
 import numpy as np
 import pytest
 from pyproj import CRS
 
-from conftest import OEDOMETER, PY, REPO, mpi_env
+from conftest import OEDOMETER
+from conftest import run as run_python
 from pfault.tools.insar_write import write_opera
 
 SITE = "config/site_example/site.opts"
@@ -18,7 +17,7 @@ WHEN = [dt.datetime(2016, 1, 1, tzinfo=dt.timezone.utc), dt.datetime(2017, 1, 1,
 
 
 def run(args):
-    proc = subprocess.run([PY, *args], cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=120)
+    proc = run_python(args, timeout=120, check=False)
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip() and "Warning" not in ln and "warn" not in ln]
     return proc.returncode, lines, proc.stderr
 

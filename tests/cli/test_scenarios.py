@@ -9,11 +9,10 @@ exit code and error line while the others complete; a bad plans file is one line
 import csv
 import json
 import os
-import subprocess
 
 import pytest
 
-from conftest import FLOW_BOX, PY, REPO, mpi_env
+from conftest import FLOW_BOX, run
 
 TIMEOUT = 300
 # the flow box (conftest) for a day in two steps
@@ -33,8 +32,8 @@ def scenarios(tmp_path, plans, *extra, scene=None):
     plans_path = tmp_path / "plans.opts"
     plans_path.write_text(plans)
     out = tmp_path / "out"
-    proc = subprocess.run([PY, "-m", "pfault.scenarios", str(scene_path), str(plans_path), "--output", str(out),
-                           *extra], cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    proc = run(["-m", "pfault.scenarios", str(scene_path), str(plans_path), "--output", str(out),
+                *extra], timeout=TIMEOUT, check=False)
     return proc, out
 
 
@@ -133,11 +132,10 @@ def test_a_bad_scene_or_missing_plans_file_is_one_line(tmp_path):
     proc, out = scenarios(tmp_path, PLANS, scene="-pfault_time_steps 1 2\n")
     assert proc.returncode == 1 and len(proc.stderr.strip().splitlines()) == 1 and "box.opts line 1" in proc.stderr
     assert not out.exists()
-    proc = subprocess.run([PY, "-m", "pfault.scenarios", "config/oedometer.opts", str(tmp_path / "nope.opts")],
-                          cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    proc = run(["-m", "pfault.scenarios", "config/oedometer.opts", str(tmp_path / "nope.opts")], timeout=TIMEOUT,
+               check=False)
     assert proc.returncode == 1 and "nope.opts: cannot read it" in proc.stderr
-    proc = subprocess.run([PY, "-m", "pfault.scenarios", "config/oedometer.opts"], cwd=REPO, env=mpi_env(),
-                          capture_output=True, text=True, timeout=TIMEOUT)
+    proc = run(["-m", "pfault.scenarios", "config/oedometer.opts"], timeout=TIMEOUT, check=False)
     assert proc.returncode == 2 and proc.stderr.startswith("usage: python -m pfault.scenarios")
 
 

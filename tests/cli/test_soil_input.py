@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from conftest import REPO, mpi_env, run_captured
+from conftest import REPO, run
 
 COLUMN = "config/soil_column.opts"
 CASES = {
@@ -44,8 +44,8 @@ def scene(tmp_path, extra):
 def test_soil_input_error_on_two_ranks(tmp_path, case):
     extra, message = CASES[case]
     out = tmp_path / "out"
-    proc = run_captured(["-m", "pfault", scene(tmp_path, extra), "-pfault_output_dir", str(out)], 2, timeout=120,
-                        env=mpi_env())
+    proc = run(["-m", "pfault", scene(tmp_path, extra), "-pfault_output_dir", str(out)], 2, timeout=120,
+               check=False)
     lines = [line for line in proc.stderr.splitlines() if line.startswith("pfault: error:")]
     assert proc.returncode == 1, proc.stderr[-2000:]
     assert len(lines) == 1 and message in lines[0], proc.stderr[-2000:]

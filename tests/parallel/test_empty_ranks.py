@@ -19,10 +19,10 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import OEDOMETER, compare_runs, mpi_env, run_scene
+from conftest import OEDOMETER, REPO, compare_runs, mpi_env, run_scene
 from pfault.io.insar import read_netcdf
 from pfault.post.rundir import read_summary
-from studies.run import run_captured
+from pfault.tools.runs import run_captured
 
 RANKS = 8
 RTOL = 1e-10
@@ -69,7 +69,7 @@ def _run(scene, out, ranks, extra, gathered=False):
         env["PFAULT_GATHERED_OUTPUT"] = "1"
     figures = [] if "-pfault_figures" in extra else ["-pfault_figures", "false"]
     args = ["-m", "pfault", scene, "-pfault_output_dir", str(out), *figures, *extra]
-    proc = run_captured(args, ranks, timeout=TIMEOUT, env=env)
+    proc = run_captured(args, ranks, cwd=REPO, env=env, timeout=TIMEOUT)
     assert proc.returncode == 0, f"{ranks} ranks: exit {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc
 

@@ -9,12 +9,10 @@ those of docs/performance.md's "Accuracy against cost" at quick size."""
 
 import json
 import os
-import subprocess
-import sys
 
 import pytest
 
-from conftest import REPO, mpi_env
+from conftest import run
 from studies import accuracy
 
 pytestmark = pytest.mark.mpi
@@ -25,8 +23,7 @@ TIMEOUT = 900
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
     out = tmp_path_factory.mktemp("accuracy_cost")
-    proc = subprocess.run([sys.executable, "benchmarks/accuracy_cost.py", "--quick", "--out", str(out)], cwd=REPO,
-                          env=mpi_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    proc = run(["benchmarks/accuracy_cost.py", "--quick", "--out", str(out)], timeout=TIMEOUT, check=False)
     with open(os.path.join(out, "results.json")) as fh:
         results = json.load(fh)
     with open(os.path.join(out, "rates.json")) as fh:

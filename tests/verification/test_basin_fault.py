@@ -2,20 +2,18 @@
 hanging wall (config/basin_fault.opts on a coarse mesh from benchmarks/basin_fault_mesh.py)."""
 
 import os
-import subprocess
 
 import numpy as np
 import pytest
 
-from conftest import PY, REPO, read_last_step, run_scene
+from conftest import read_last_step, run, run_scene
 
 
 @pytest.fixture(scope="module")
 def basin(tmp_path_factory):
     d = tmp_path_factory.mktemp("basin")
     msh = str(d / "basin.msh")
-    subprocess.run([PY, os.path.join("benchmarks", "basin_fault_mesh.py"), msh, "--size", "250"], cwd=REPO,
-                   check=True, capture_output=True, timeout=300)
+    run([os.path.join("benchmarks", "basin_fault_mesh.py"), msh, "--size", "250"], timeout=300)
     out = {}
     for ranks in (1, 2):
         _, s = run_scene("config/basin_fault.opts", d / f"out{ranks}", ranks=ranks,

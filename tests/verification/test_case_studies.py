@@ -2,8 +2,9 @@
 1-vs-2 rank agreement. Paper-size runs and the comparison with the paper are a benchmark
 (benchmarks/case_studies.py), not a test.
 
-Each scene runs once per rank count (module fixtures) at mesh size factor 4 with 3 time steps of 3.3 years:
-about 10 s per run on the 2-core reference machine, four runs in all.
+Each scene runs once per rank count at mesh size factor 4 with 3 time steps of 3.3 years (conftest.shared_run:
+tests/verification/test_faces_hold.py checks the same runs): about 10 s per run on the 2-core reference machine,
+four runs in all.
 
 Sign conventions (pfault.mesh.fault): the vertex order of a fault triangle in fault.xdmf gives its normal,
 from the minus to the plus side; jumps are plus minus minus. fields.xdmf holds the serial vertices (used by
@@ -17,7 +18,7 @@ import os
 import numpy as np
 import pytest
 
-from conftest import QUERETARO, WUXI, run_scene
+from conftest import QUERETARO, WUXI
 from pfault.post import meshes, rundir
 
 SMALL = ("-pfault_mesh_size_factor", "4", "-pfault_time_steps", "3")
@@ -32,25 +33,23 @@ QRO_WELLS = np.array([[12000.0, 12000.0], [12000.0, 15000.0], [12000.0, 18000.0]
 RANK_RTOL = 1e-8
 
 
-def _run(tmp_path_factory, scene, name):
-    base = tmp_path_factory.mktemp(name)
+def _run(shared_run, scene):
     out = {}
     for ranks in (1, 2):
-        outdir = base / f"ranks{ranks}"
-        _, summary = run_scene(scene, outdir, ranks=ranks, extra=SMALL)
+        summary, outdir = shared_run(scene, ranks, SMALL)
         assert summary is not None and summary["converged"], f"{scene} on {ranks} rank(s) did not converge"
         out[ranks] = (str(outdir), summary)
     return out
 
 
 @pytest.fixture(scope="module")
-def wuxi(tmp_path_factory):
-    return _run(tmp_path_factory, WUXI, "wuxi")
+def wuxi(shared_run):
+    return _run(shared_run, WUXI)
 
 
 @pytest.fixture(scope="module")
-def queretaro(tmp_path_factory):
-    return _run(tmp_path_factory, QUERETARO, "queretaro")
+def queretaro(shared_run):
+    return _run(shared_run, QUERETARO)
 
 
 def _surface_subsidence(run_dir):

@@ -10,7 +10,7 @@ law's, -t_N / k: tests/verification/test_faults.py.)"""
 import numpy as np
 import pytest
 
-from conftest import FISSURE_BOX, QUERETARO, TWO_BLOCKS, WUXI, run_scene
+from conftest import FISSURE_BOX, QUERETARO, TWO_BLOCKS, WUXI
 from pfault.faults import contact as ct
 from pfault.post import rundir
 
@@ -25,6 +25,7 @@ SCENES = {
     "fissure_box": (FISSURE_BOX, ["-pfault_geostatic", "true", "-pfault_material_sand_head_drawdown",
                                   "0:0,1*year:20,2*year:0,3*year:0", "-pfault_time_steps", "3",
                                   "-pfault_time_end", "3*year"]),
+    # the case studies' small runs (tests/verification/test_case_studies.py: conftest.shared_run)
     "wuxi": (WUXI, ["-pfault_mesh_size_factor", "4", "-pfault_time_steps", "3"]),
     "wuxi_2_ranks": (WUXI, ["-pfault_mesh_size_factor", "4", "-pfault_time_steps", "3"]),
     "queretaro": (QUERETARO, ["-pfault_mesh_size_factor", "4", "-pfault_time_steps", "3"]),
@@ -38,11 +39,11 @@ def jumps_by_step(out):
 
 
 @pytest.mark.parametrize("name", list(SCENES))
-def test_stuck_faces_add_no_slip_and_closed_faces_do_not_open(tmp_path, name):
+def test_stuck_faces_add_no_slip_and_closed_faces_do_not_open(shared_run, name):
     scene, extra = SCENES[name]
-    _, summary = run_scene(scene, tmp_path, extra=extra, ranks=2 if name.endswith("2_ranks") else 1)
+    summary, out = shared_run(scene, 2 if name.endswith("2_ranks") else 1, extra)
     assert summary["converged"]
-    steps = jumps_by_step(tmp_path)
+    steps = jumps_by_step(out)
     seen = np.zeros(3, np.int64)
     for prev, cur in zip(steps, steps[1:]):
         state = cur["state"]

@@ -4,11 +4,10 @@ potency converges under refinement of the fault's elements (studies/fault_conver
 
 import math
 import os
-import subprocess
 
 import pytest
 
-from conftest import PY, REPO, run_scene
+from conftest import run, run_scene
 from studies.fault_convergence import measures
 
 SCENE = "config/faulted_aquifer.opts"
@@ -21,8 +20,8 @@ def slabs(tmp_path_factory):
     out = {}
     for h in SIZES:
         msh = str(d / f"slab{h:g}.msh")
-        subprocess.run([PY, os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--slab", "--fault-size",
-                        f"{h:g}"], cwd=REPO, check=True, capture_output=True, timeout=300)
+        run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--slab", "--fault-size",
+             f"{h:g}"], timeout=300)
         _, s = run_scene(SCENE, d / f"out{h:g}", extra=["-pfault_mesh_file", msh])
         out[h] = (s, measures(str(d / f"out{h:g}")))
     _, s = run_scene(SCENE, d / "out4-2", ranks=2, extra=["-pfault_mesh_file", str(d / "slab4.msh")])
@@ -68,8 +67,7 @@ def test_block_at_size_factor_2_converges_in_every_step(tmp_path):
     iterations and 8 sub-steps, a face cycling between stuck and open), the fault slides over most of its
     length, and no face under the land surface opens."""
     msh = str(tmp_path / "block2.msh")
-    subprocess.run([PY, os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--size-factor", "2"], cwd=REPO,
-                   check=True, capture_output=True, timeout=300)
+    run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--size-factor", "2"], timeout=300)
     _, s = run_scene(SCENE, tmp_path / "out", extra=["-pfault_mesh_file", msh])
     steps = [st for st in s["steps"] if st["time_s"] > 0]
     assert len(steps) == 10

@@ -10,11 +10,10 @@ to 1e-9, a symmetry or a path independence to round-off, penalty faces at 1000 E
 
 import os
 import re
-import subprocess
 
 import pytest
 
-from conftest import PY, REPO, mpi_env
+from conftest import run
 from studies import hard_cases as hc
 
 pytestmark = pytest.mark.mpi               # runs under mpirun; part of the default suite (scripts/test.sh)
@@ -27,8 +26,8 @@ QUICK = [c.name for c in hc.select(hc.cases(), quick=True)]
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
     runs = tmp_path_factory.mktemp("hard_cases")
-    proc = subprocess.run([PY, os.path.join("benchmarks", "hard_cases.py"), "--quick", "--runs-dir", str(runs)],
-                          cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    proc = run([os.path.join("benchmarks", "hard_cases.py"), "--quick", "--runs-dir", str(runs)], timeout=TIMEOUT,
+               check=False)
     with open(runs / "report.md") as fh:
         report = fh.read()
     rows = {}

@@ -20,13 +20,12 @@ slips, opens or breaks, checked against a closed form and by running the scene t
 
 import json
 import os
-import subprocess
 
 import h5py
 import numpy as np
 import pytest
 
-from conftest import PY, REPO, WUXI, run_scene
+from conftest import REPO, run, run_scene, WUXI
 
 RHO_G = 1000.0 * 9.80665
 SIGMA, H1, COHESION, PHI, NU, DIP = 0.5e6, 57.0, 0.1e6, 20.0, 0.25, 45.0
@@ -98,9 +97,8 @@ def continue_by(scene, run_dir, out, extra, times, tables, margin, factor):
 def block(tmp_path_factory):
     d = tmp_path_factory.mktemp("margin_block")
     msh = str(d / "block.msh")
-    subprocess.run([PY, os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--slab", "--fault-size", "5",
-                    "--dip", f"{DIP:g}", "--depth", "20", "--clay", "10", "--fault-x", "40", "--length", "100"],
-                   cwd=REPO, check=True, capture_output=True, timeout=300)
+    run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--slab", "--fault-size", "5",
+         "--dip", f"{DIP:g}", "--depth", "20", "--clay", "10", "--fault-x", "40", "--length", "100"], timeout=300)
     scene = d / "block.opts"
     scene.write_text(BLOCK)
     extra = ["-pfault_mesh_file", msh, *[v for name in MATERIALS
@@ -175,8 +173,8 @@ FISSURE = "config/wuxi_fissure.opts"
 def aquifer(tmp_path_factory):
     d = tmp_path_factory.mktemp("margin_aquifer")
     msh = str(d / "slice.msh")
-    subprocess.run([PY, os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--strike-length", "40",
-                    "--size-factor", "2"], cwd=REPO, check=True, capture_output=True, timeout=300)
+    run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--strike-length", "40",
+         "--size-factor", "2"], timeout=300)
     extra = ["-pfault_mesh_file", msh]
     runs = {ranks: run_scene(AQUIFER, d / f"out{ranks}", ranks=ranks, extra=extra)[1] for ranks in (1, 2)}
     return d, extra, runs
@@ -325,8 +323,8 @@ def soil_aquifer(tmp_path_factory):
     ranks, where a face is near slipping (after the first year its margin is 4.1 m)."""
     d = tmp_path_factory.mktemp("margin_soil_aquifer")
     msh = str(d / "slice.msh")
-    subprocess.run([PY, os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--strike-length", "40",
-                    "--size-factor", "2"], cwd=REPO, check=True, capture_output=True, timeout=300)
+    run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--strike-length", "40",
+         "--size-factor", "2"], timeout=300)
     with open(os.path.join(REPO, AQUIFER)) as fh:
         text = fh.read()
     assert SAND_MODULUS in text
