@@ -5,9 +5,9 @@ a set of MPI workers started once (``python tests/inprocess.py`` under mpirun).
 petsc4py, NumPy, h5py, meshio and gmsh imported, MPI started), and most of the suite's runs are smaller than that.
 Here each run goes through ``pfault.__main__.main``, the command line's own code, which replaces PETSc's options
 database by the scene's and the run's options (pfault.__main__.start_petsc): no option carries over from one run
-to the next. The run destroys what it made (pfault.cli.main); the database is emptied after it and the random
-state of the partitioner (PT-Scotch) is reset before it, so that a run is partitioned as in a new process (the
-same run twice in one process was otherwise partitioned differently the second time). What the run prints, from
+to the next. The run destroys what it made (pfault.cli.main); the database is emptied after it (and pfault resets
+the partitioner's random state before it partitions: pfault.mesh.distributed.reset_partitioner_random_state), so
+that a run is partitioned as in a new process. What the run prints, from
 Python or from C (PETSc prints through C stdio), is captured from the file descriptors as a process's output would
 be; the run has a timeout; the exit code is main's (for more ranks, the first non-zero of the ranks', as mpirun's).
 
@@ -111,17 +111,6 @@ def deadline(seconds: float | None) -> Iterator[None]:
         signal.signal(signal.SIGINT, interrupt)
 
 
-def reset_partitioner() -> None:
-    """PT-Scotch's random state as a new process has it (SCOTCH_randomReset of the loaded libscotch, if any)."""
-    with open("/proc/self/maps") as fh:
-        paths = {line.split()[-1] for line in fh if "libscotch" in line and ".so" in line}
-    for path in sorted(paths):
-        lib = ctypes.CDLL(path)
-        if hasattr(lib, "SCOTCH_randomReset"):
-            lib.SCOTCH_randomReset()
-            return
-
-
 def run_main(args: Sequence[str], cwd: str, timeout: float | None) -> int:
     """pfault.__main__.main on ``python ARGS`` from ``cwd``, on every rank; its exit code. The options database is
     left empty, as the process started it, and the garbage collected (on every rank at once)."""
@@ -131,7 +120,6 @@ def run_main(args: Sequence[str], cwd: str, timeout: float | None) -> int:
     from pfault.optionsfile import replace_database
     here = os.getcwd()
     os.chdir(cwd)
-    reset_partitioner()
     try:
         with deadline(timeout):
             return pfault_main.main(["pfault", *map(str, args[2:])])
@@ -199,7 +187,7 @@ def serve() -> None:
 def cell_ranks(args: Sequence[str], cwd: str) -> list[int] | None:
     """The rank of every cell (serial order; on rank 0, None on the others) of the scene ``args`` (scene file,
     options) as a run here partitions it: the model built and destroyed, nothing solved (the workers' check that a
-    run here is partitioned as in a new process, tests/cli/test_runs.py)."""
+    run here is partitioned as in a new process, tests/cli/test_runs_here.py)."""
     import numpy as np
     from petsc4py import PETSc
 
@@ -207,7 +195,6 @@ def cell_ranks(args: Sequence[str], cwd: str) -> list[int] | None:
     from pfault.simulation import Simulation
     here = os.getcwd()
     os.chdir(cwd)
-    reset_partitioner()
     try:
         replace_database(PETSc.Options(), petsc_arguments(args[0], list(args[1:])))
         sim = Simulation(args[0], ["pfault", *args])

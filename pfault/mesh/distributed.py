@@ -8,6 +8,8 @@ numbering through the migration PetscSF returned by DMPlexDistribute.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -129,6 +131,7 @@ def _set_partition(dm, tets, nv, together=None):
     if ours:
         opts.delValue(strategy)     # (unread when -mat_partitioning_type picks another partitioner)
     target = PETSc.IS()
+    reset_partitioner_random_state()
     mp.apply(target)
     rank_of = target.getIndices()
     if together is not None and len(together):
@@ -341,3 +344,18 @@ def gather_vertex_values(mesh: LocalMesh, values: np.ndarray) -> np.ndarray | No
 def gather_cell_values(mesh: LocalMesh, values: np.ndarray) -> np.ndarray | None:
     """Values per local cell (nc, k) -> (n_global_cells, k) in serial order on rank 0 (None elsewhere)."""
     return _gather(mesh, values, 0, (0, mesh.n_global_cells))
+
+
+def reset_partitioner_random_state() -> None:
+    """PT-Scotch's random state as a new process has it (SCOTCH_randomReset of the loaded libscotch, if any), so
+    that a mesh is partitioned the same whatever was partitioned before in the same process (a driver or a test
+    running scenes one after another: the second run of a scene was partitioned otherwise, and with another
+    partition a direct fault solve refactored at other Newton iterations)."""
+    with contextlib.suppress(OSError):
+        with open("/proc/self/maps") as fh:
+            paths = {line.split()[-1] for line in fh if "libscotch" in line and ".so" in line}
+        for path in sorted(paths):
+            lib = ctypes.CDLL(path)
+            if hasattr(lib, "SCOTCH_randomReset"):
+                lib.SCOTCH_randomReset()
+                return

@@ -34,8 +34,8 @@ def alive_objects():
 @pytest.mark.parametrize("scene", ["two_blocks", "flow_box"])
 def test_a_run_here_is_the_run_of_a_new_process(tmp_path, scene, ranks):
     """The two blocks (faults, slip) and the flow box (groundwater flow): every dataset of every output step and
-    the summary's maxima equal to the bit, the same Newton iterations, partitioned alike on 2 ranks (the
-    workers reset PT-Scotch's random state: without it a second run in one process was partitioned otherwise)."""
+    the summary's maxima equal to the bit, the same Newton iterations, partitioned alike on 2 ranks (pfault resets
+    the partitioner's random state: without it a second run in one process was partitioned otherwise)."""
     opts = write_flow_box(tmp_path) if scene == "flow_box" else TWO_BLOCKS
     extra = ["-pfault_time_end", "1*day", "-pfault_time_steps", "2"] if scene == "flow_box" else []
     _, here = run_scene(opts, tmp_path / "here", ranks=ranks, extra=extra)
@@ -50,7 +50,7 @@ def test_a_run_here_is_the_run_of_a_new_process(tmp_path, scene, ranks):
 
 def test_the_workers_partition_as_a_new_process():
     """The MPI workers partition a scene as a new process does (tests/scripts/fault_partition.py), run after run:
-    PT-Scotch's random state is reset before each (without it, every run after the first in a process was
+    pfault resets PT-Scotch's random state before each partition (without it, every run after the first in a process was
     partitioned otherwise: 892/836 cells instead of 836/892 on the two blocks at 8x6x6)."""
     options = [TWO_BLOCKS, "-pfault_box_cells", "8,6,6", "-pfault_output_dir", "unused"]
     new = run_script("fault_partition.py", ranks=2, args=options[1:3])["cell_ranks"]
