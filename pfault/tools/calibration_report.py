@@ -107,8 +107,10 @@ def _fitted_options(out, problem, r, scene):
         lines.append("# the scene's data files, found from anywhere")
         lines += [f"-{name} {value}" for name, value in files.items()]
     lines.append("# the fitted values")
-    lines += [f"-{p.option} {p.option_value(v)}" + ("" if ok else "   # not identifiable: held at this value")
-              for p, v, ok in zip(problem.parameters, r.values, r.identifiable)]
+    for p, v, ok in zip(problem.parameters, r.values, r.identifiable):
+        if not ok:
+            lines.append(f"# {p.name} is not identifiable from the observations: held at its value of the fit")
+        lines.append(f"-{p.option} {p.option_value(v)}")
     with open(os.path.join(out, "fitted.opts"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
 

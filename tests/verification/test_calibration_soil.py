@@ -74,3 +74,5 @@ def test_cc_is_reported_not_identifiable_when_the_heads_never_reach_the_preconso
     assert rows["Cc_clay"]["identifiable"] == "false" and rows["Cc_clay"]["fitted"] == ""
     assert rows["Cc_clay"]["standard_error"] == "inf" and rows["Cc_clay"]["lower_2se"] == ""
     assert float(rows["Cr_clay"]["fitted"]) == pytest.approx(cr["value"], rel=1e-12)
+    with open(tmp_path / "fit" / "fitted.opts") as fh:
+        assert "# Cc_clay is not identifiable from the observations: held at its value of the fit\n" in fh.read()
