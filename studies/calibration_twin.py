@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pfault.post.rundir import read_station_series
+from pfault.tools.calibration_input import scene_files_absolute
 from pfault.tools.runs import Run, run_pfault
 
 from .run import REPO, mpi_env
@@ -113,13 +114,15 @@ def true_overrides(twin: Twin = MODULI):
 
 def scene_of(workdir, twin: Twin = MODULI) -> str:
     """The scene the calibration runs: the twin's own, or with its fixed options a file in workdir that includes
-    it and adds them."""
+    it, names its data files by absolute paths (as fitted.opts does: they are found beside the scene) and adds
+    them."""
     if not twin.fixed:
         return twin.scene
     path = os.path.join(os.path.abspath(workdir), "scene.opts")
+    scene = os.path.join(REPO, twin.scene)
     with open(path, "w") as fh:
-        fh.write(f"-options_file {os.path.join(REPO, twin.scene)}\n")
-        fh.writelines(f"-{k} {v}\n" for k, v in twin.fixed.items())
+        fh.write(f"-options_file {scene}\n")
+        fh.writelines(f"-{k} {v}\n" for k, v in {**scene_files_absolute(scene), **twin.fixed}.items())
     return path
 
 
