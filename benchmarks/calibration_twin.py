@@ -25,6 +25,35 @@ from studies import calibration_twin as twin  # noqa: E402
 DAYS = [15, 30, 45, 60, 75, 90, 105, 120]
 
 
+def report(out, t, wall, label):
+    """Prints a calibration's figures against the twin's truth (how many standard errors away; a parameter the
+    tool found not identifiable says so) and returns them as a dict."""
+    with open(os.path.join(out, "fit", "calibration.json")) as fh:
+        s = json.load(fh)
+    print(f"\n{label}: {s['runs']} runs, {s['iterations']} Jacobians, wall {wall:.1f} s (fit "
+          f"{s['wall_s']:.1f} s, load {os.getloadavg()[0]:.1f}); phi {s['phi_start']:.4g} -> {s['phi']:.4g}, "
+          f"{s['degrees_of_freedom']} dof, residual variance {s['residual_variance']:.3f}")
+    print(f"  {'parameter':<8} {'true':>10} {'start':>10} {'fitted':>10} {'std err':>9} {'(log10)':>8} {'off/se':>7}")
+    for name, true in t.true.items():
+        f = s["fitted"][name]
+        if not f.get("identifiable", True):
+            held = f"NOT IDENTIFIABLE (held at {f['held_at']:.4g})"
+            print(f"  {name:<8} {true:10.4g} {t.start[name]:10.4g} {held:>36}")
+            continue
+        se_x = f.get("standard_error_log10")
+        off = np.log10(f["value"] / true) / se_x if se_x else (f["value"] - true) / f["standard_error"]
+        print(f"  {name:<8} {true:10.4g} {t.start[name]:10.4g} {f['value']:10.4g} {f['standard_error']:9.3g} "
+              f"{se_x or float('nan'):8.4f} {off:7.2f}")
+    names = list(t.true)
+    corr = s["correlation"]
+    print("  correlation: " + ", ".join(f"{names[i]}-{names[j]} " + ("-" if corr[i][j] is None else f"{corr[i][j]:.3f}")
+                                          for i in range(len(names)) for j in range(i + 1, len(names))))
+    return {"case": label, "wall_s": wall, "runs": s["runs"], "phi": s["phi"],
+            "fitted": {k: v["value"] for k, v in s["fitted"].items()},
+            "standard_error": {k: v["standard_error"] for k, v in s["fitted"].items()},
+            "not_identifiable": s.get("not_identifiable", [])}
+
+
 def one(out, workers):
     shutil.rmtree(out, ignore_errors=True)
     t0 = time.perf_counter()
@@ -32,24 +61,7 @@ def one(out, workers):
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         sys.exit(f"calibration failed ({proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    with open(os.path.join(out, "fit", "calibration.json")) as fh:
-        s = json.load(fh)
-    print(f"\nworkers {workers}: {s['runs']} runs, {s['iterations']} Jacobians, wall {wall:.1f} s (fit "
-          f"{s['wall_s']:.1f} s, load {os.getloadavg()[0]:.1f}); phi {s['phi_start']:.4g} -> {s['phi']:.4g}, "
-          f"{s['degrees_of_freedom']} dof, residual variance {s['residual_variance']:.3f}")
-    print(f"  {'parameter':<8} {'true':>10} {'start':>10} {'fitted':>10} {'std err':>9} {'(log10)':>8} {'off/se':>7}")
-    for name, true in twin.TRUE.items():
-        f = s["fitted"][name]
-        se_x = f.get("standard_error_log10")
-        off = np.log10(f["value"] / true) / se_x if se_x else (f["value"] - true) / f["standard_error"]
-        print(f"  {name:<8} {true:10.4g} {twin.START[name]:10.4g} {f['value']:10.4g} {f['standard_error']:9.3g} "
-              f"{se_x or float('nan'):8.4f} {off:7.2f}")
-    names = list(twin.TRUE)
-    print("  correlation: " + ", ".join(f"{names[i]}-{names[j]} {s['correlation'][i][j]:.3f}"
-                                          for i in range(3) for j in range(i + 1, 3)))
-    return {"workers": workers, "wall_s": wall, "runs": s["runs"], "phi": s["phi"],
-            "fitted": {k: v["value"] for k, v in s["fitted"].items()},
-            "standard_error": {k: v["standard_error"] for k, v in s["fitted"].items()}}
+    return {"workers": workers, **report(out, twin.MODULI, wall, f"workers {workers}")}
 
 
 def main():

@@ -168,9 +168,23 @@ def _write_pest(args, params, obs):
 def _print_result(problem, r, out):
     print(f"{PROG}: phi {r.phi_start:.6g} -> {r.phi:.6g} in {len(problem.evaluations)} runs "
           f"({r.dof} degrees of freedom, residual variance {r.variance:.4g}); {r.message}")
-    for p, v, se, sx, b in zip(problem.parameters, r.values, r.se_value, r.se_x, r.at_bound):
+    lower, upper = problem.bounds()
+    for p, v, se, sx, b, ok, lo, hi in zip(problem.parameters, r.values, r.se_value, r.se_x, r.at_bound,
+                                           r.identifiable, lower, upper):
+        if not ok:
+            what = "log10 " if p.log else ""
+            print(f"  {p.name:<12} NOT IDENTIFIABLE: the observations do not pin it within its bounds [{p.lower:.6g}, "
+                  f"{p.upper:.6g}] (standard error of its {what}value {sx:.3g} against their span {hi - lo:.3g}); "
+                  f"no fitted value (held at {v:.6g})")
+            continue
         extra = f" (log10 se {sx:.4g}: a factor {10 ** sx:.4g})" if p.log else ""
         print(f"  {p.name:<12} {v:.6g} +/- {se:.3g}{extra}{'  AT A BOUND' if b else ''}")
+    blind = [p.name for p, ok in zip(problem.parameters, r.identifiable) if not ok]
+    if blind:
+        print(f"{PROG}: {', '.join(blind)} not identifiable from these observations: no observation depends on "
+              f"{'it' if len(blind) == 1 else 'them'} enough; fix {'it' if len(blind) == 1 else 'them'} from other "
+              "data, or observe what depends on it (for a compression index Cc: heads below the preconsolidation "
+              "head)")
     print(f"{PROG}: -> {out} (parameters.csv, residuals.csv, runs.csv, fitted/, fitted.opts, "
           "observed_vs_simulated.png)")
 

@@ -19,7 +19,11 @@ it: the flow model's well rates (``-pfault_flow_well_rate``, a time:rate table) 
 Each plan is its own pfault run (pfault.tools.runs) into ``DIR/<plan>/`` (log ``DIR/<plan>.log``), up to
 ``--workers`` at a time (default: the cores divided by ``--ranks``). The comparison, from each run's
 summary.json, is ``DIR/scenarios.csv``, printed as a table, and ``DIR/scenarios.png``. A plan that fails is a row
-with its exit code and error line and no values; the other plans complete.
+with its exit code and error line and no values; the other plans complete. With soils that remember the table has
+each plan's inelastic subsidence (what stays when the heads recover) and its smallest head margin (the least further
+drawdown any cell could still have borne elastically; 0 when some cell compacted on its virgin line): plans that
+keep the heads above the critical heads and plans that draw below them differ in kind, not by a factor. Columns
+no plan has a value for (the soils' in a scene of linear soils) are left out of the printed table and the figure.
 
 Exit codes: 0 every plan completed; 1 bad input (the scene, the plans file: an unknown option, a plan that
 sets nothing, two plans with one name), one line and nothing written; 2 usage; 4 the output directory cannot be
@@ -58,7 +62,9 @@ COLUMNS = (("max_subsidence_m", "max_subsidence_m", "subsidence [m]"),
            ("max_fault_slip_m", "max_fault_slip_m", "slip [m]"),
            ("max_horizontal_strain", "max_horizontal_strain", "strain [-]"),
            ("max_angular_distortion", "max_angular_distortion", "distortion [-]"),
-           ("max_fissure_prone_length_m", "max_fissure_prone_length_m", "fissure-prone [m]"))
+           ("max_fissure_prone_length_m", "max_fissure_prone_length_m", "fissure-prone [m]"),
+           ("max_subsidence_inelastic_m", "max_subsidence_inelastic_m", "inelastic subs. [m]"),
+           ("min_head_margin_m", "min_head_margin_m", "head margin [m]"))
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
@@ -222,11 +228,18 @@ def write_csv(path: str, rows: Sequence[Row]) -> None:
                                                     for c, _, _ in COLUMNS], f"{r.wall_s:.2f}", r.options, r.error])
 
 
+def shown_columns(rows: Sequence[Row]) -> list[tuple[str, str, str]]:
+    """The COLUMNS some plan has a value for (every one when no plan completed)."""
+    shown = [col for col in COLUMNS if any(r.values[col[0]] is not None for r in rows)]
+    return shown or list(COLUMNS)
+
+
 def format_table(rows: Sequence[Row]) -> str:
     """The table as printed: 4 significant digits, failed plans with their error line."""
-    head = ["plan", "status", *[h for _, _, h in COLUMNS]]
+    columns = shown_columns(rows)
+    head = ["plan", "status", *[h for _, _, h in columns]]
     body = [[r.plan, r.status if r.status == "completed" else f"failed ({r.code})",
-             *["-" if r.values[c] is None else f"{r.values[c]:.4g}" for c, _, _ in COLUMNS]] for r in rows]
+             *["-" if r.values[c] is None else f"{r.values[c]:.4g}" for c, _, _ in columns]] for r in rows]
     width = [max(len(x[k]) for x in [head] + body) for k in range(len(head))]
     lines = ["  ".join(x[k].rjust(width[k]) if k > 1 else x[k].ljust(width[k]) for k in range(len(x)))
              for x in [head] + body]
@@ -243,10 +256,14 @@ def write_figure(path: str, rows: Sequence[Row], outdir: str) -> str | None:
         import matplotlib.pyplot as plt
     except ImportError:
         return None
-    fig, axes = plt.subplots(2, 4, figsize=(16, 7), constrained_layout=True)
+    columns = shown_columns(rows)
+    grid = -(-(len(columns) + 1) // 4)
+    fig, axes = plt.subplots(grid, 4, figsize=(16, 3.5 * grid), constrained_layout=True, squeeze=False)
     names = [r.plan for r in rows]
     colors = [f"C{k % 10}" for k in range(len(rows))]
-    for ax, (col, _, head) in zip(axes.flat, COLUMNS):
+    for ax in list(axes.flat)[len(columns) + 1:]:
+        ax.set_visible(False)
+    for ax, (col, _, head) in zip(axes.flat, columns):
         vals = [r.values[col] for r in rows]
         ax.bar(range(len(rows)), [0.0 if v is None else v for v in vals], color=colors)
         for k, v in enumerate(vals):
@@ -254,7 +271,7 @@ def write_figure(path: str, rows: Sequence[Row], outdir: str) -> str | None:
                 ax.text(k, 0.0, "failed", rotation=90, ha="center", va="bottom", color="red")
         ax.set_xticks(range(len(rows)), names, rotation=30, ha="right")
         ax.set_title(head)
-    ax = axes.flat[-1]
+    ax = axes.flat[len(columns)]
     for r, c in zip(rows, colors):
         summary = read_summary(os.path.join(outdir, r.plan)) if r.status == "completed" else None
         steps = [s for s in (summary or {}).get("steps", []) if "max_subsidence_m" in s]

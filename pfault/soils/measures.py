@@ -31,13 +31,15 @@ REPORT_STRAIN = 1e-12       # plastic volumetric strain of a step below which a 
 @dataclass(frozen=True)
 class LayerFigures:
     """A material with memory at a step: its cells, those that compacted on the virgin line in the last step, the
-    mean head margin and critical head of its cells (m, weighted by their volumes: pfault.soils.columns on why a mean)
-    and its largest inelastic compaction (vertical strain)."""
+    mean head margin and critical head of its cells (m, weighted by their volumes: pfault.soils.columns on why a mean),
+    its largest inelastic compaction (vertical strain) and the smallest head margin of its cells (m: 0 where a cell
+    compacts on its virgin line)."""
     cells: int
     cells_virgin: int
     head_margin_m: float
     critical_head_m: float
     max_compaction_inelastic: float
+    min_head_margin_m: float
 
 
 @dataclass(frozen=True)
@@ -97,24 +99,37 @@ def layer_figures(soil: SoilCells, mpi: Any, memory: SoilMemory, load: SoilLoad,
                                                 volume * q["head_margin"], volume * q["preconsolidation_head"]]))
     largest = np.full(n, -np.inf)
     np.maximum.at(largest, soil.layer, q["compaction_inelastic"])
+    smallest = np.full(n, np.inf)
+    np.minimum.at(smallest, soil.layer, q["head_margin"])
     mpi.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
     mpi.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
+    mpi.Allreduce(MPI.IN_PLACE, smallest, op=MPI.MIN)
     v = np.where(sums[:, 2] > 0, sums[:, 2], 1.0)
-    return SoilMeasures({name: LayerFigures(int(c[0]), int(c[1]), float(c[3] / w), float(c[4] / w), float(m))
-                         for name, c, w, m in zip(soil.names, sums, v, largest)})
+    return SoilMeasures({name: LayerFigures(int(c[0]), int(c[1]), float(c[3] / w), float(c[4] / w), float(m),
+                                            float(h))
+                         for name, c, w, m, h in zip(soil.names, sums, v, largest, smallest)})
+
+
+def _smallest(values) -> float:
+    """The smallest finite value (NaN when none: a record written before the figure existed)."""
+    return float(min((v for v in values if np.isfinite(v)), default=np.nan))
 
 
 def soil_summary(soil: SoilCells, mpi: Any, steps: list) -> dict:
-    """summary.json's ``soils`` (per layer: its cells, the largest inelastic compaction over the steps ``steps``, and
-    at the last of them the cells that compacted on the virgin line, the mean head margin and critical head) and the land surface's inelastic and elastic subsidence (pfault.soils.columns.SoilSurface's
-    figures: their largest over the steps, and at the last)."""
+    """summary.json's ``soils`` (per layer: its cells, the largest inelastic compaction and the smallest head margin
+    over the steps ``steps``, and at the last of them the cells that compacted on the virgin line, the mean head
+    margin and critical head), ``min_head_margin_m`` (the smallest head margin of any cell of any layer over the
+    steps: 0 when some cell compacted on its virgin line, the further drawdown the soils would have borne elastically
+    otherwise) and the land surface's inelastic and elastic subsidence (pfault.soils.columns.SoilSurface's figures:
+    their largest over the steps, and at the last)."""
     per = [r["soils"] for r in steps if "soils" in r]
     last = per[-1] if per else {}
     out = {name: {**last.get(name, {}),
-                  "max_compaction_inelastic": max([p[name]["max_compaction_inelastic"] for p in per], default=0.0)}
+                  "max_compaction_inelastic": max([p[name]["max_compaction_inelastic"] for p in per], default=0.0),
+                  "min_head_margin_m": _smallest(p[name].get("min_head_margin_m", np.nan) for p in per)}
            for name in soil.names}
     surface = [r for r in steps if "max_subsidence_inelastic_m" in r]
-    figures = {"soils": out}
+    figures = {"soils": out, "min_head_margin_m": _smallest(f["min_head_margin_m"] for f in out.values())}
     for key in ("max_subsidence_inelastic_m", "max_subsidence_elastic_m"):
         figures[key] = max([r[key] for r in surface], default=0.0)
     for key in ("subsidence_inelastic_at_max_m", "subsidence_elastic_at_max_m"):

@@ -18,6 +18,13 @@ the weighted residuals in x and s^2 = phi / (m - n) the residual variance per de
 components, n parameters); standard errors sqrt(diag C_x), correlations C_ij / (se_i se_j). For a log
 parameter the standard error of log10(p) is the natural one (a factor 10^se either way); its first-order
 value p ln(10) se is reported too.
+
+(J^T J)^-1 is taken through the singular values of J: a direction of x along which the residuals do not change
+(a singular value at round-off, numerical rank as numpy.linalg.matrix_rank counts it) has an infinite variance, and
+so has every parameter that moves along it, where a pseudo-inverse would report a variance of zero. A parameter
+is identifiable when its standard error in x is within the span of its bounds in x; one that the observations do
+not pin down within its bounds (the compression index Cc of a soil whose heads never went below its
+preconsolidation head: no observation depends on it) is reported as not identifiable, not as a fitted number.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from .calibration_input import Observations, Parameter
 from .runs import Run, RunResult, run_many
 
 DERIVATIVE_STEP = 0.01      # forward-difference step in the fitted variables
+NULL_LOADING = 1e-8         # a parameter's share of a null direction of J above which its variance is infinite
 FTOL = 1e-4                 # relative reduction of phi below which the fit stops (PEST's PHIREDSTP is 0.01)
 XTOL = 1e-4                 # relative change of x below which the fit stops
 
@@ -178,6 +186,7 @@ class Fit:
     se_value: np.ndarray         # first-order standard errors of the values (SI)
     correlation: np.ndarray
     at_bound: np.ndarray         # bool
+    identifiable: np.ndarray     # bool: the standard error in x within the span of the bounds in x
     iterations: int
     message: str
     converged: bool
@@ -192,12 +201,31 @@ def statistics(jac: np.ndarray, phi: float, values: np.ndarray, log: np.ndarray,
     m, n = jac.shape
     dof = m - n - nuisance
     variance = phi / dof if dof > 0 else np.nan
-    cov = variance * np.linalg.pinv(jac.T @ jac)
+    cov = variance * _inverse_normal(jac)
     se_x = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     se_value = np.where(log, values * np.log(10.0) * se_x, scale * se_x)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(se_x, se_x)
     return dof, variance, cov, se_x, se_value, corr
+
+
+def _inverse_normal(jac: np.ndarray) -> np.ndarray:
+    """(J^T J)^-1 through the singular values of J; a parameter that moves along a null direction of J (singular
+    value at round-off) has an infinite variance and NaN covariances."""
+    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    null = s <= (s.max(initial=0.0) * max(jac.shape) * np.finfo(np.float64).eps)
+    inv = (vt.T * np.where(null, 0.0, 1.0 / np.where(null, 1.0, s) ** 2)) @ vt
+    free = np.abs(vt[null]).max(axis=0, initial=0.0) > NULL_LOADING
+    inv[free, :] = np.nan
+    inv[:, free] = np.nan
+    inv[free, free] = np.inf
+    return inv
+
+
+def identifiable(se_x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Which parameters the observations pin down: a finite standard error in the fitted variable no larger than
+    the span of its bounds there (a parameter known no better than its bounds say was not fitted)."""
+    return np.isfinite(se_x) & (se_x <= upper - lower)
 
 
 def fit(problem: Problem, max_iterations: int = 20) -> Fit:
@@ -214,4 +242,5 @@ def fit(problem: Problem, max_iterations: int = 20) -> Fit:
     nuisance = problem.insar.nuisance if problem.insar is not None else 0
     dof, variance, _, se_x, se_value, corr = statistics(res.jac, phi, values, logs, problem.scale(), nuisance)
     return Fit(values, np.array(res.x), phi, problem.evaluations[0].phi, dof, variance, se_x, se_value, corr,
-               res.active_mask != 0, int(res.njev), str(res.message), bool(res.status > 0), best)
+               res.active_mask != 0, identifiable(se_x, lower, upper), int(res.njev), str(res.message),
+               bool(res.status > 0), best)

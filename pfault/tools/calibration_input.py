@@ -11,8 +11,14 @@ Parameter file (CSV, one parameter a line, ``#`` comments), as PEST's parameter 
   e.g. a pumping rate;
 - ``start``, ``lower``, ``upper``: numbers in SI units, or with a unit as in a scene (``10*MPa``);
 - ``transform``: ``log`` (fitted as log10 of the value, as PEST's PARTRANS log; the default for options in
-  Pa, the moduli) or ``none``;
+  Pa, the moduli, and for the soils' compressibilities: the compression and recompression indices Cc and Cr and
+  CSUB's skeletal specific storages) or ``none``;
 - ``value`` (optional): the template above; empty for a plain number.
+
+The bounds of a property of the soils that remember must be values the property admits
+(pfault.materials.properties.RANGES): a preconsolidation head at most 0 (m below the initial heads), an index
+positive, an overconsolidation ratio at least 1 (a sign slip there would not fail a run at once but fit another
+soil). Other properties' bounds are not checked: a run outside their range fails and the fit steps back.
 
 Observation file (CSV): ``name,time,ux,uy,uz,sigma``: a station of the scene's ``-pfault_stations`` file, the
 time from the start of the scene (s, or with a unit: ``30*day``), the displacement components relative to the
@@ -33,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..materials.properties import RANGES, property_name
 from ..optionsfile import ArgumentError, read_options_file
 from ..options import spec_for
 from ..paths import beside_scene, file_problem
@@ -48,6 +55,10 @@ COMPONENTS = ("ux", "uy", "uz")
 PARAMETER_FIX = "its first line names the columns name,option,start,lower,upper[,transform][,value]"
 OBSERVATION_FIX = "its first line names the columns name,time,ux,uy,uz,sigma"
 NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+# material properties fitted as log10 by default besides the moduli (unit Pa): compressibilities, which span decades
+LOG_PROPERTIES = ("compression_index", "recompression_index", "inelastic_skeletal_specific_storage",
+                  "elastic_skeletal_specific_storage")
+MEMORY_PROPERTIES = LOG_PROPERTIES + ("preconsolidation_stress", "overconsolidation_ratio", "preconsolidation_head")
 
 
 class CalibrationInputError(Exception):
@@ -154,11 +165,14 @@ def _parameter(path, line, cells):
                                     "parameter's value goes")
     unit = spec.unit
     start, lower, upper = (_quantity(cells[c], where, c, unit) for c in ("start", "lower", "upper"))
-    transform = (cells.get("transform") or ("log" if unit == "Pa" else "none")).lower()
+    log_default = unit == "Pa" or (spec.kind == "property" and property_name(option) in LOG_PROPERTIES)
+    transform = (cells.get("transform") or ("log" if log_default else "none")).lower()
     if transform not in ("log", "none"):
         raise CalibrationInputError(f"{where}: transform '{transform}' is not log or none (log: fitted as log10 "
                                     "of the value, for moduli and conductivities)")
     _check_range(where, name, start, lower, upper, transform == "log")
+    if spec.kind == "property" and property_name(option) in MEMORY_PROPERTIES:
+        _check_admissible(where, name, option, lower, upper)
     p = Parameter(name, option, start, lower, upper, transform == "log", template)
     _check_template(where, p, spec)
     return p
@@ -174,6 +188,16 @@ def _check_range(where, name, start, lower, upper, log):
     if log and lower <= 0:
         raise CalibrationInputError(f"{where}: {name}: a log transform needs a lower bound > 0, got {lower:g}; "
                                     "give a positive lower bound or transform none")
+
+
+def _check_admissible(where, name, option, lower, upper):
+    """Both bounds of a material property within what the property admits (the runs would fail otherwise)."""
+    prop = property_name(option)
+    test, words = RANGES[prop]
+    bad = [f"{what} bound {v:g}" for what, v in (("lower", lower), ("upper", upper)) if not test(np.float64(v))]
+    if bad:
+        raise CalibrationInputError(f"{where}: {name}: {' and '.join(bad)} of -{option}: a {prop.replace('_', ' ')} "
+                                    f"is {words}; give bounds within that range")
 
 
 def _check_template(where, p, spec):

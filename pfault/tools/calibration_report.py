@@ -2,7 +2,9 @@
 
 - ``parameters.csv``: name, option, start, fitted, standard_error (first-order, in the option's unit),
   standard_error_log10 (log parameters), lower_2se, upper_2se (fitted -/+ 2 standard errors in the fitted
-  variable: a factor 10^(2 se) for log parameters), lower, upper, transform, at_bound;
+  variable: a factor 10^(2 se) for log parameters), lower, upper, transform, at_bound, identifiable; a parameter
+  the observations do not pin down within its bounds (pfault.tools.calibration.identifiable) has identifiable
+  false and its fitted value and band empty (its standard error, inf or larger than its bounds' span, stays);
 - ``correlation.csv``: the parameters' correlation matrix at the optimum;
 - ``residuals.csv``: per station, time and component: observed, simulated, sigma, residual (simulated -
   observed) and weighted residual, for the fitted run;
@@ -13,7 +15,9 @@
 - ``observed_vs_simulated.png``: each station's observed components (error bars: sigma) and the simulated
   series at the start and at the fit;
 - ``calibration.json``: the summary (phi at the start and the fit, degrees of freedom, residual variance,
-  iterations, runs, the optimiser's message, per-station RMS of the weighted residuals).
+  iterations, runs, the optimiser's message, per-station RMS of the weighted residuals; per parameter its value
+  and standard errors, or for a parameter not identifiable ``value`` null, ``identifiable`` false and
+  ``held_at``, the value the fitted run used; ``not_identifiable`` lists them). Non-finite numbers are null.
 """
 
 from __future__ import annotations
@@ -50,12 +54,13 @@ def _parameters(out, problem, r):
     with open(os.path.join(out, "parameters.csv"), "w", newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["name", "option", "start", "fitted", "standard_error", "standard_error_log10", "lower_2se",
-                    "upper_2se", "lower", "upper", "transform", "at_bound"])
+                    "upper_2se", "lower", "upper", "transform", "at_bound", "identifiable"])
         for k, p in enumerate(problem.parameters):
-            band = [problem.to_values(r.x + s * r.se_x)[k] for s in (-2, 2)]
-            w.writerow([p.name, "-" + p.option, repr(p.start), repr(float(r.values[k])), f"{r.se_value[k]:.6g}",
-                        f"{r.se_x[k]:.6g}" if p.log else "", f"{band[0]:.6g}", f"{band[1]:.6g}", repr(p.lower),
-                        repr(p.upper), "log" if p.log else "none", str(bool(r.at_bound[k])).lower()])
+            ok = bool(r.identifiable[k])
+            band = [f"{problem.to_values(r.x + s * r.se_x)[k]:.6g}" if ok else "" for s in (-2, 2)]
+            w.writerow([p.name, "-" + p.option, repr(p.start), repr(float(r.values[k])) if ok else "",
+                        f"{r.se_value[k]:.6g}", f"{r.se_x[k]:.6g}" if p.log else "", *band, repr(p.lower),
+                        repr(p.upper), "log" if p.log else "none", str(bool(r.at_bound[k])).lower(), str(ok).lower()])
 
 
 def _correlation(out, problem, r):
@@ -64,7 +69,7 @@ def _correlation(out, problem, r):
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["name", *names])
         for name, row in zip(names, r.correlation):
-            w.writerow([name, *(f"{c:.6f}" for c in row)])
+            w.writerow([name, *(f"{c:.6f}" if np.isfinite(c) else "" for c in row)])
 
 
 def _residuals(out, problem, r):
@@ -102,7 +107,10 @@ def _fitted_options(out, problem, r, scene):
         lines.append("# the scene's data files, found from anywhere")
         lines += [f"-{name} {value}" for name, value in files.items()]
     lines.append("# the fitted values")
-    lines += [f"-{p.option} {p.option_value(v)}" for p, v in zip(problem.parameters, r.values)]
+    for p, v, ok in zip(problem.parameters, r.values, r.identifiable):
+        if not ok:
+            lines.append(f"# {p.name} is not identifiable from the observations: held at its value of the fit")
+        lines.append(f"-{p.option} {p.option_value(v)}")
     with open(os.path.join(out, "fitted.opts"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
 
@@ -144,6 +152,21 @@ def _figure(out, problem, fitted_dir):
     plt.close(fig)
 
 
+def _finite(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def _fitted(p, value, se, se_x, at_bound, ok) -> dict:
+    """calibration.json's entry of a parameter: its value and standard errors, or null and the value it was held
+    at when the observations do not pin it down."""
+    out = {"option": "-" + p.option, "value": float(value) if ok else None, "identifiable": bool(ok),
+           "standard_error": _finite(se), **({"standard_error_log10": _finite(se_x)} if p.log else {}),
+           "at_bound": bool(at_bound)}
+    if not ok:
+        out["held_at"] = float(value)
+    return out
+
+
 def _summary(out, problem, r, scene, wall):
     obs = problem.observations
     w = r.evaluation.residual[:len(obs.value)]
@@ -153,10 +176,10 @@ def _summary(out, problem, r, scene, wall):
         "runs": len(problem.evaluations), "failed_runs": sum(not ev.result.ok for ev in problem.evaluations),
         "wall_s": wall, "observations": int(len(obs.value)), "parameters": len(problem.parameters),
         "degrees_of_freedom": r.dof, "phi_start": r.phi_start, "phi": r.phi, "residual_variance": r.variance,
-        "fitted": {p.name: {"option": "-" + p.option, "value": float(v), "standard_error": float(se),
-                            **({"standard_error_log10": float(sx)} if p.log else {}), "at_bound": bool(b)}
-                   for p, v, se, sx, b in zip(problem.parameters, r.values, r.se_value, r.se_x, r.at_bound)},
-        "correlation": r.correlation.tolist(),
+        "fitted": {p.name: _fitted(p, v, se, sx, b, ok) for p, v, se, sx, b, ok
+                   in zip(problem.parameters, r.values, r.se_value, r.se_x, r.at_bound, r.identifiable)},
+        "not_identifiable": [p.name for p, ok in zip(problem.parameters, r.identifiable) if not ok],
+        "correlation": [[_finite(c) for c in row] for row in r.correlation],
         "rms_weighted_residual_per_station": per_station,
         "fitted_run": "fitted", "fitted_options": "fitted.opts",
     }

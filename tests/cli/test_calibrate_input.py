@@ -51,6 +51,11 @@ CASES = {
     "log of zero": (PARAMS.replace("0.5*L/s,50*L/s,none", "0,50*L/s,log"), OBS,
                     "parameter file {p} line 3: Q: a log transform needs a lower bound > 0, got 0; give a positive "
                     "lower bound or transform none"),
+    "preconsolidation head above the initial heads": (
+        PARAMS.replace("E_clay,-pfault_material_clay_young_modulus,10*MPa,1*MPa,100*MPa,log,",
+                       "hp_clay,-pfault_material_clay_preconsolidation_head,-2,-10,1,,"), OBS,
+        "parameter file {p} line 2: hp_clay: upper bound 1 of -pfault_material_clay_preconsolidation_head: a "
+        "preconsolidation head is zero or negative (m below the initial heads); give bounds within that range"),
     "missing column": (PARAMS, OBS.replace(",sigma", ",sd"), "observation file {o}: no column sigma in its header "
                        "line 'name,time,ux,uy,uz,sd'; its first line names the columns name,time,ux,uy,uz,sigma"),
     "unknown station": (PARAMS, OBS.replace("E1,", "E9,"), "observation file {o} line 3: station 'E9' is not in "

@@ -2,6 +2,10 @@
 
 The box is linear (elastic skeleton, linear flow, no fault): halving the pumping halves every displacement, so
 the halved plan's subsidence and strain are half the baseline's to round-off and the no-pumping plan's are zero.
+With soils that remember (config/seasonal_plans.opts on config/seasonal.opts, one column of cells) plans differ in
+kind: the plan that holds the heads above the critical heads compacts nothing inelastically and recovers every
+winter, halving the drawdown leaves about 0.37 of the subsidence, not 0.5, and what stays after the pumping stops is
+the inelastic part.
 The table (scenarios.csv) holds each plan's own summary.json values exactly; a plan that fails is a row with its
 exit code and error line while the others complete; a bad plans file is one line, exit 1, nothing written.
 """
@@ -49,6 +53,7 @@ def summary(out, plan):
 
 KEYS = ("max_subsidence_m", "final_subsidence_m", "max_fault_opening_m", "max_fault_slip_m",
         "max_horizontal_strain", "max_angular_distortion", "max_fissure_prone_length_m")
+SOIL_KEYS = ("max_subsidence_inelastic_m", "min_head_margin_m")
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +77,8 @@ def test_plans_are_ordered_as_the_physics_says(box_plans):
     assert rows["halved"]["options"] == "-pfault_flow_well_rate 0:0,1*day:1.5*L/s"
     assert (out / "scenarios.png").exists()
     assert "halved" in proc.stdout and "no_pumping" in proc.stdout
+    # linear soils: the soils' columns are empty in the file and left out of the printed table
+    assert all(rows[p][k] == "" for p in rows for k in SOIL_KEYS) and "head margin" not in proc.stdout
 
 
 def test_the_table_holds_each_plans_own_summary_values(box_plans):
@@ -94,6 +101,42 @@ def test_a_failed_plan_is_reported_and_the_others_complete(box_plans):
     assert "broken: pfault: error: -pfault_time_steps" in proc.stdout
     assert os.path.exists(out / "broken.log")
     assert not os.path.exists(out / "broken")
+
+
+def test_plans_on_soils_that_remember_differ_in_kind_not_by_a_factor(tmp_path):
+    """config/seasonal_plans.opts on one column of the seasonal scene, a step every half year (its summer lows and
+    winter highs): the sand preconsolidated 4 m below the initial heads, the clay 2 m."""
+    out = tmp_path / "out"
+    proc = subprocess.run([PY, "-m", "pfault.scenarios", "config/seasonal.opts", "config/seasonal_plans.opts",
+                           "--output", str(out), "--workers", "2", "-pfault_box_cells", "1,1,40",
+                           "-pfault_time_steps", "16", "-pfault_output_every", "16"],
+                          cwd=REPO, env=mpi_env(), capture_output=True, text=True, timeout=TIMEOUT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rows = {plan: {k: float(v) for k, v in r.items() if k in KEYS + SOIL_KEYS} for plan, r in table(out).items()}
+    assert list(rows) == ["baseline", "held", "halved", "stopped_year4"]
+    base, held, half, stopped = (rows[p] for p in rows)
+    # held above the critical heads (the clay's lowest head -1.5 m against -2 m, the sand's -3 m against -4 m):
+    # nothing inelastic, the least margin the clay's 0.5 m, and the summer's 34 mm recovered by the last winter
+    assert held["max_subsidence_inelastic_m"] == 0.0
+    assert held["min_head_margin_m"] == pytest.approx(0.5, abs=1e-9)
+    assert held["max_subsidence_m"] == pytest.approx(0.03399, rel=2e-3) and abs(held["final_subsidence_m"]) < 1e-9
+    # below them: cells on the virgin line (margin 0 up to round-off), most of the subsidence inelastic
+    for plan in (base, half, stopped):
+        assert abs(plan["min_head_margin_m"]) < 1e-9 and plan["max_subsidence_inelastic_m"] > 0.15
+    assert base["max_subsidence_m"] == pytest.approx(0.7052, rel=2e-3)
+    assert base["max_subsidence_inelastic_m"] == pytest.approx(0.5864, rel=2e-3)
+    # half the drawdown, not half the subsidence: the first 2 m (clay) and 4 m (sand) are elastic in both plans
+    ratio = half["max_subsidence_m"] / base["max_subsidence_m"]
+    assert ratio == pytest.approx(0.3734, rel=2e-3) and ratio < 0.5 - 0.1
+    # pumping stopped: the heads recover, the elastic part comes back, the inelastic part stays
+    assert stopped["final_subsidence_m"] == pytest.approx(0.2507, rel=2e-3)
+    assert stopped["final_subsidence_m"] == pytest.approx(stopped["max_subsidence_inelastic_m"], rel=0.05)
+    assert stopped["final_subsidence_m"] < 0.75 * stopped["max_subsidence_m"]
+    for plan in rows:                                       # the table holds each plan's own summary.json values
+        s = summary(out, plan)
+        assert rows[plan]["min_head_margin_m"] == s["min_head_margin_m"]
+        assert rows[plan]["max_subsidence_inelastic_m"] == s["max_subsidence_inelastic_m"]
+    assert "inelastic subs. [m]" in proc.stdout and "head margin [m]" in proc.stdout
 
 
 def test_two_ranks_per_plan_agree_with_one(box_plans, tmp_path):

@@ -17,6 +17,7 @@ on 2; at size factor 2 the step failed after 93).
 
 import os
 
+import numpy as np
 import pytest
 
 from conftest import compare_runs, REPO, run, run_scene
@@ -83,6 +84,10 @@ def test_column_on_one_and_two_ranks(column_runs):
     virgin = [r["cells_virgin"] for r in s1["steps"] if not r.get("initial")]
     assert virgin[1] == virgin[3] == 234 and virgin[2] == virgin[4] == 0      # loading, unloading, reloading
     compare_runs(one, two, 1e-10)
+    # the smallest head margin of the cells (a MIN over the ranks): 0 on the virgin line, then the unloading's rebound
+    m1, m2 = ([[r["soils"][k]["min_head_margin_m"] for k in sorted(r["soils"])] for r in s["steps"]] for s in (s1, s2))
+    assert np.allclose(m1, m2, rtol=0, atol=1e-9) and np.allclose(m1[3], [7.0, 7.0, 14.0], rtol=0, atol=1e-9), m1
+    assert np.allclose(m1[2], 0.0, atol=1e-9) and abs(s1["min_head_margin_m"]) < 1e-9
 
 
 @pytest.mark.parametrize("ranks", [1, 2])

@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 
-from pfault.tools.calibration import Problem, statistics
+from pfault.tools.calibration import Problem, identifiable, statistics
 from pfault.tools.calibration_input import (CalibrationInputError, Observations, read_observations,
                                             read_parameters)
 from pfault.post.rundir import StationSeries, read_station_series
@@ -39,6 +39,27 @@ def test_standard_error_of_a_log_parameter_is_first_order_in_the_value():
     assert se_value[0] == pytest.approx(1e7 * np.log(10) * se_x[0], rel=1e-14)
 
 
+def test_a_parameter_no_residual_depends_on_has_an_infinite_standard_error_not_zero():
+    """A zero Jacobian column (a soil's Cc whose heads never reach its preconsolidation head): a pseudo-inverse
+    would give it a variance of 0; its variance is infinite, it is not identifiable, and the other parameters'
+    statistics are those of the fit without it."""
+    rng = np.random.default_rng(5)
+    jac = np.column_stack([rng.standard_normal(30), np.zeros(30), rng.standard_normal(30)])
+    values, log, scale = np.array([1.0, 0.3, 2.0]), np.array([False, True, False]), np.ones(3)
+    dof, variance, cov, se_x, se_value, corr = statistics(jac, 27.0, values, log, scale)
+    assert dof == 27 and variance == 1.0
+    assert se_x[1] == np.inf and se_value[1] == np.inf and np.isnan(corr[1, 0]) and np.isnan(corr[0, 1])
+    alone = statistics(jac[:, [0, 2]], 27.0, values[[0, 2]], log[[0, 2]], scale[:2])
+    assert np.allclose(se_x[[0, 2]], alone[3] * np.sqrt(28 / 27), rtol=1e-12)     # one dof fewer there
+    assert corr[0, 2] == pytest.approx(alone[5][0, 1], rel=1e-12)
+    lower, upper = np.array([-5.0, -2.0, -5.0]), np.array([5.0, 0.0, 5.0])
+    assert identifiable(se_x, lower, upper).tolist() == [True, False, True]
+    # a column at the forward runs' round-off (1e-9 of the others): finite but beyond its bounds' span of 2
+    jac[:, 1] = 1e-9 * rng.standard_normal(30)
+    se = statistics(jac, 27.0, values, log, scale)[3]
+    assert 1e7 < se[1] < 1e10 and identifiable(se, lower, upper).tolist() == [True, False, True]
+
+
 def write(path, text):
     path.write_text(text)
     return str(path)
@@ -53,6 +74,20 @@ def test_parameters_with_units_log_by_default_for_moduli_and_a_template(tmp_path
     assert (e.option, e.start, e.lower, e.upper, e.log) == ("pfault_material_clay_young_modulus", 1e7, 1e6, 1e8, True)
     assert not nu.log and nu.option_value(0.25) == "0.25"
     assert q.log and q.start == pytest.approx(2e-3) and q.option_value(3e-3) == "0:0.003,1*year:0.003"
+
+
+def test_soil_indices_are_log_by_default_the_preconsolidation_head_is_not(tmp_path):
+    path = write(tmp_path / "p.csv", "name,option,start,lower,upper\n"
+                 "Cc,-pfault_material_clay_compression_index,0.2,0.02,2\n"
+                 "Cr,-pfault_material_clay_recompression_index,0.02,0.002,0.2\n"
+                 "hp,-pfault_material_clay_preconsolidation_head,-3,-10,0\n"
+                 "Sskv,-pfault_material_sand_inelastic_skeletal_specific_storage,1e-4,1e-6,1e-2\n")
+    cc, cr, hp, sskv = read_parameters(path)
+    assert cc.log and cr.log and sskv.log and not hp.log
+    assert (hp.start, hp.lower, hp.upper) == (-3.0, -10.0, 0.0)
+    assert Problem("s.opts", [cc, cr, hp], None, str(tmp_path)).bounds()[1].tolist() == [pytest.approx(np.log10(2)),
+                                                                                          pytest.approx(-0.69897),
+                                                                                          0.0]
 
 
 def test_fitted_variables_and_their_bounds(tmp_path):
