@@ -50,6 +50,10 @@ class SoilTerm(TermDefaults):
     # reloaded below its cap overshoots past it, the soft virgin tangent then sends it far below, and full steps
     # 2-cycle (a clay column reloaded 4 m below its earlier 5 m: |F| 7.8e5, 2.6e6, 7.8e5, ...)
     full_newton_steps = False
+    # within a configuration (each cell's branch) its tangent varies only in the cells' moduli (K = p'/kappa or
+    # p'/lambda, a factor exp(d eps_v / kappa) between iterates): an iterative solver's AMG set up at one Newton
+    # iterate preconditions the next (pfault.solver.policy.PreconditionerReuse)
+    moduli_vary_only = True
 
     def __init__(self, soil: SoilCells, n_cells: int, grad: np.ndarray, vol: np.ndarray, dofs: np.ndarray,
                  free: np.ndarray, to_global: Any, owned: tuple, lame: tuple, overburden: np.ndarray, mpi: Any) -> None:

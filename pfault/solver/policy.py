@@ -141,6 +141,38 @@ class FactorReuse:
             self._kept_its = its
 
 
+class PreconditionerReuse:
+    """Keeps an iterative solver's preconditioner (the fieldsplit's submatrices, its Schur approximation and the
+    displacement's AMG hierarchy) across the Jacobians of one step that differ from the one it was set up for in
+    stiffness moduli only: the same configuration (every fault face's state, every soil cell's branch) and, where
+    the Jacobian varies within it, only terms whose cells' moduli vary (Term.moduli_vary_only: a soil's
+    K = p'/kappa, which moves by the factor exp(d eps_v / kappa) between Newton iterates, a few per cent at most
+    within a step). Such a preconditioner is spectrally equivalent to a new one, and FGMRES takes the Jacobian
+    itself as its operator, so the solution is the same to the Krylov tolerance; a set-up costs about as much as
+    five Krylov iterations here. It is set up anew at the first Jacobian of every step and whenever a
+    configuration changes or a term whose Jacobian carries constraints varies (a slipping face). Paper-size Wuxi
+    with soils that remember, 2 ranks: 10 set-ups instead of 27 for the same Newton iterations (benchmarks/README.md,
+    "wuxi_inelastic.py")."""
+
+    def __init__(self, comm: Any) -> None:
+        self.mpi = comm.tompi4py()
+        self.states: np.ndarray | None = None       # the configuration the preconditioner was set up for
+
+    def begin_step(self) -> None:
+        self.states = None
+
+    def decide(self, snes: Any, states: np.ndarray, moduli_only: bool) -> None:
+        """A new Jacobian with the terms in ``states`` was assembled; ``moduli_only``: it differs from others of
+        its configuration in moduli only. Keep the preconditioner or set it up anew (collective)."""
+        same = self.states is not None and moduli_only and len(self.states) == len(states) and bool(
+            np.array_equal(self.states, states))
+        keep = self.mpi.allreduce(same, op=MPI.LAND)
+        snes.getKSP().getPC().setReusePreconditioner(keep)      # for the elastic trial's and margins' solves
+        set_lag_preconditioner(snes, -1 if keep else -2)        # SNES sets the PC's flag after this
+        if not keep:
+            self.states = np.array(states)
+
+
 def factorisation_cost(ksp: Any) -> float | None:
     """What the factorisation in ``ksp``'s PC costs in FGMRES iterations on its factors, from MUMPS's counts
     (collective): its flops (RINFOG(3)) over ``FACTOR_FLOP_RATE`` times an iteration's flops (a forward and
@@ -276,6 +308,7 @@ class StepSolver:
         self.monitor = monitor
         self.F = equations.create_vec()
         self.reuse: FactorReuse | None = None
+        self.keep: PreconditionerReuse | None = None
         nonlinear = not equations.linear
         if nonlinear:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
@@ -302,6 +335,8 @@ class StepSolver:
         if nonlinear:
             if is_direct() and ksp.getType() != "preonly":
                 self.reuse = FactorReuse(self.comm, ksp)
+            elif not is_direct() and any(term.moduli_vary_only for term in equations.terms):
+                self.keep = PreconditionerReuse(self.comm)
             state.histories = equations.begin_step(state.u, state.histories)
             if geostatic:
                 # the glued gravity solve (geostatic) sets the solver up on its own operator first: a
@@ -318,6 +353,8 @@ class StepSolver:
         states = self.eq.assemble_jacobian(x, J, self.state.histories, config)
         if states is not None and self.reuse is not None:
             self.reuse.decide(snes, states)
+        elif states is not None and self.keep is not None:
+            self.keep.decide(snes, states, self.eq.moduli_vary_only)
 
     # -- linear solves ---------------------------------------------------------------------------------
     def solve_linear(self, A: Any, b: Any, x: Any) -> int:
@@ -356,8 +393,9 @@ class StepSolver:
         nonlinear = not eq.linear
         t0 = time.perf_counter()
         nfact, njac = (factorizations() if nonlinear else 0), eq.n_jacobians
-        if self.reuse is not None:
-            self.reuse.begin_step()
+        for reuse in (self.reuse, self.keep):
+            if reuse is not None:
+                reuse.begin_step()
         trial = start = None
         if nonlinear:
             state.histories = eq.begin_step(state.u, state.histories)    # under the loads it was solved for
