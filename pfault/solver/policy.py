@@ -151,7 +151,7 @@ class PreconditionerReuse:
     itself as its operator, so the solution is the same to the Krylov tolerance; a set-up costs about as much as
     five Krylov iterations here. It is set up anew at the first Jacobian of every step and whenever a
     configuration changes or a term whose Jacobian carries constraints varies (a slipping face). Paper-size Wuxi
-    with soils that remember, 2 ranks: 10 set-ups instead of 27 for the same Newton iterations (benchmarks/README.md,
+    with soils that remember, 2 ranks: 20 set-ups instead of 27 for the same Newton iterations (benchmarks/README.md,
     "wuxi_inelastic.py")."""
 
     def __init__(self, comm: Any) -> None:
@@ -159,7 +159,7 @@ class PreconditionerReuse:
         self.states: np.ndarray | None = None       # the configuration the preconditioner was set up for
 
     def begin_step(self) -> None:
-        self.states = None
+        """Nothing: a step's start changes no configuration."""
 
     def decide(self, snes: Any, states: np.ndarray, moduli_only: bool) -> None:
         """A new Jacobian with the terms in ``states`` was assembled; ``moduli_only``: it differs from others of
