@@ -143,22 +143,29 @@ class FactorReuse:
 
 class PreconditionerReuse:
     """Keeps an iterative solver's preconditioner (the fieldsplit's submatrices, its Schur approximation and the
-    displacement's AMG hierarchy) across Jacobians that differ from the one it was set up for in stiffness moduli
-    only: the same configuration (every fault face's state, every soil cell's branch) and, where the Jacobian varies
-    within it, only terms whose cells' moduli vary (Term.moduli_vary_only: a soil's K = p'/kappa or p'/lambda, which
-    moves by the factor exp(d eps_v / kappa) between Newton iterates and by the ratio of the stresses between
-    steps). Such a preconditioner is spectrally equivalent to a new one (the same constraints, moduli within a
-    bounded factor), and FGMRES applies the Jacobian itself, so the solution is the same to the Krylov tolerance;
-    a set-up costs about as much as five Krylov iterations at Wuxi's paper size. It is set up anew whenever a
-    configuration changes or a term whose Jacobian carries constraints varies (a slipping face: its friction
-    direction). Only scenes with such a term build it: the others set the preconditioner up at every new Jacobian.
-    Paper-size Wuxi with soils that remember, 2 ranks, kept within a step only: 20 set-ups instead of 27 for the
-    same Newton iterations and 263 Krylov iterations instead of 262; across steps too: benchmarks/README.md,
-    "wuxi_inelastic.py"."""
+    displacement's AMG hierarchy) across the Newton iterations of a step whose Jacobians differ from the one it was
+    set up for in stiffness moduli only: the same configuration (every fault face's state, every soil cell's branch)
+    and, where the Jacobian varies within it, only terms whose cells' moduli vary (Term.moduli_vary_only: a soil's
+    K = p'/kappa or p'/lambda, which moves by the factor exp(d eps_v / kappa) between Newton iterates, a few per cent
+    within a step). Such a preconditioner is spectrally equivalent to a new one (the same constraints, moduli within
+    a bounded factor), and FGMRES applies the Jacobian itself, so the solution is the same to the Krylov tolerance;
+    a set-up costs about as much as five Krylov iterations at Wuxi's paper size. It is set up anew at a step's first
+    Jacobian, whenever a configuration changes, and where a term whose Jacobian carries constraints varies (a
+    slipping face: its friction direction). Only scenes with a term of moduli build it: the others set the
+    preconditioner up at every new Jacobian, as before.
+
+    Paper-size Wuxi with soils that remember, 2 ranks: 20 set-ups instead of 27 for the same Newton iterations and
+    263 Krylov iterations instead of 262. Kept across steps as well (the stresses, and so the moduli, move by up to
+    a factor of 2 over the drawdown near the land surface), the Krylov iterations of steps 5-10 rose from 22-23 to
+    25, 28, 31, 33, 36, 38: 57 more iterations for 6 fewer set-ups."""
 
     def __init__(self, comm: Any) -> None:
         self.mpi = comm.tompi4py()
         self.states: np.ndarray | None = None       # the configuration the preconditioner was set up for
+
+    def begin_step(self) -> None:
+        """A step's first Jacobian sets the preconditioner up anew."""
+        self.states = None
 
     def decide(self, snes: Any, states: np.ndarray, moduli_only: bool) -> None:
         """A new Jacobian with the terms in ``states`` was assembled; ``moduli_only``: it differs from others of
@@ -392,8 +399,9 @@ class StepSolver:
         nonlinear = not eq.linear
         t0 = time.perf_counter()
         nfact, njac = (factorizations() if nonlinear else 0), eq.n_jacobians
-        if self.reuse is not None:
-            self.reuse.begin_step()
+        for reuse in (self.reuse, self.keep):
+            if reuse is not None:
+                reuse.begin_step()
         trial = start = None
         if nonlinear:
             state.histories = eq.begin_step(state.u, state.histories)    # under the loads it was solved for

@@ -1,6 +1,6 @@
 """When the iterative solver keeps its preconditioner (pfault.solver.policy.PreconditionerReuse): across Jacobians of
-one configuration (every face's state, every soil cell's branch) that vary only in soil moduli; set up anew at the
-first Jacobian, at a changed configuration and where a term whose Jacobian carries constraints varies (a slipping
+one configuration (every face's state, every soil cell's branch) within a step that vary only in soil moduli; set
+up anew at a step's first Jacobian, at a changed configuration and where a term whose Jacobian carries constraints varies (a slipping
 face). One rank, with a stand-in SNES that records what the rule sets (the PC's reuse flag, SNES's lag)."""
 
 import numpy as np
@@ -52,8 +52,11 @@ def test_kept_while_only_moduli_vary_in_one_configuration():
                                 (moved, True),          # a cell changed branch
                                 (moved, True)):
         keep.decide(snes, states, moduli_only)
-    assert snes.pc.reuse == [False, True, True, False, True, False, True]
-    assert snes.lag == [-2, -1, -1, -2, -1, -2, -1]     # SNES rebuilds once (-2) or keeps (-1)
+    keep.begin_step()                                   # a new step: its first Jacobian sets it up
+    keep.decide(snes, moved, True)
+    keep.decide(snes, moved, True)
+    assert snes.pc.reuse == [False, True, True, False, True, False, True, False, True]
+    assert snes.lag == [-2, -1, -1, -2, -1, -2, -1, -2, -1]     # SNES rebuilds once (-2) or keeps (-1)
 
 
 def test_which_terms_vary_in_moduli_only():
