@@ -158,4 +158,3 @@ class SoilColumns:
                        "max_subsidence_elastic_m": float(elastic.max(initial=0.0)),
                        "subsidence_inelastic_at_max_m": at(inelastic), "subsidence_elastic_at_max_m": at(elastic)}
         return self.mpi.bcast(figures, root=0), points
-

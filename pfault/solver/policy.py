@@ -151,26 +151,29 @@ class PreconditionerReuse:
     a bounded factor), and FGMRES applies the Jacobian itself, so the solution is the same to the Krylov tolerance;
     a set-up costs about as much as five Krylov iterations at Wuxi's paper size. It is set up anew at a step's first
     Jacobian, whenever a configuration changes, and where a term whose Jacobian carries constraints varies (a
-    slipping face: its friction direction). Only scenes with a term of moduli build it: the others set the
-    preconditioner up at every new Jacobian, as before.
+    slipping face: its friction direction). Only scenes with such a term (soils that remember) build it: the others
+    set the preconditioner up at every new Jacobian, as before.
 
     Paper-size Wuxi with soils that remember, 2 ranks: 20 set-ups instead of 27 for the same Newton iterations and
     263 Krylov iterations instead of 262. Kept across steps as well (the stresses, and so the moduli, move by up to
     a factor of 2 over the drawdown near the land surface), the Krylov iterations of steps 5-10 rose from 22-23 to
     25, 28, 31, 33, 36, 38: 57 more iterations for 6 fewer set-ups."""
 
-    def __init__(self, comm: Any) -> None:
-        self.mpi = comm.tompi4py()
+    step_null_pivots = 0        # (FactorReuse's record: an AMG fixes no null pivots)
+
+    def __init__(self, comm: Any, equations: Any) -> None:
+        self.mpi, self.eq = comm.tompi4py(), equations
         self.states: np.ndarray | None = None       # the configuration the preconditioner was set up for
 
     def begin_step(self) -> None:
         """A step's first Jacobian sets the preconditioner up anew."""
         self.states = None
 
-    def decide(self, snes: Any, states: np.ndarray, moduli_only: bool) -> None:
-        """A new Jacobian with the terms in ``states`` was assembled; ``moduli_only``: it differs from others of
-        its configuration in moduli only. Keep the preconditioner or set it up anew (collective)."""
-        same = self.states is not None and moduli_only and len(self.states) == len(states) and bool(
+    def decide(self, snes: Any, states: np.ndarray) -> None:
+        """A new Jacobian with the terms in ``states`` was assembled (differing from others of its configuration in
+        moduli only where the equations' ``moduli_vary_only`` says so): keep the preconditioner or set it up anew
+        (collective)."""
+        same = self.states is not None and self.eq.moduli_vary_only and len(self.states) == len(states) and bool(
             np.array_equal(self.states, states))
         keep = self.mpi.allreduce(same, op=MPI.LAND)
         snes.getKSP().getPC().setReusePreconditioner(keep)      # for the elastic trial's and margins' solves
@@ -313,8 +316,7 @@ class StepSolver:
         self.comm = equations.comm
         self.monitor = monitor
         self.F = equations.create_vec()
-        self.reuse: FactorReuse | None = None
-        self.keep: PreconditionerReuse | None = None
+        self.reuse: FactorReuse | PreconditionerReuse | None = None
         nonlinear = not equations.linear
         if nonlinear:
             PETSc.Log.begin()           # the factorisation count comes from PETSc's log (MatLUFactorNum)
@@ -342,7 +344,7 @@ class StepSolver:
             if is_direct() and ksp.getType() != "preonly":
                 self.reuse = FactorReuse(self.comm, ksp)
             elif not is_direct() and any(term.moduli_vary_only for term in equations.terms):
-                self.keep = PreconditionerReuse(self.comm)
+                self.reuse = PreconditionerReuse(self.comm, equations)
             state.histories = equations.begin_step(state.u, state.histories)
             if geostatic:
                 # the glued gravity solve (geostatic) sets the solver up on its own operator first: a
@@ -359,8 +361,6 @@ class StepSolver:
         states = self.eq.assemble_jacobian(x, J, self.state.histories, config)
         if states is not None and self.reuse is not None:
             self.reuse.decide(snes, states)
-        elif states is not None and self.keep is not None:
-            self.keep.decide(snes, states, self.eq.moduli_vary_only)
 
     # -- linear solves ---------------------------------------------------------------------------------
     def solve_linear(self, A: Any, b: Any, x: Any) -> int:
@@ -399,9 +399,8 @@ class StepSolver:
         nonlinear = not eq.linear
         t0 = time.perf_counter()
         nfact, njac = (factorizations() if nonlinear else 0), eq.n_jacobians
-        for reuse in (self.reuse, self.keep):
-            if reuse is not None:
-                reuse.begin_step()
+        if self.reuse is not None:
+            self.reuse.begin_step()
         trial = start = None
         if nonlinear:
             state.histories = eq.begin_step(state.u, state.histories)    # under the loads it was solved for

@@ -39,8 +39,13 @@ class FakeSnes:
         self.lag.append(lag)
 
 
+class FakeEquations:
+    moduli_vary_only = True     # the Jacobian last assembled varies in soil moduli only
+
+
 def test_kept_while_only_moduli_vary_in_one_configuration():
-    snes, keep = FakeSnes(), PreconditionerReuse(PETSc.COMM_SELF)
+    snes, eq = FakeSnes(), FakeEquations()
+    keep = PreconditionerReuse(PETSc.COMM_SELF, eq)
     faces_cells = np.array([0, 0, 2, 1, 1, 1])         # faces' states, then cells' branches
     moved = faces_cells.copy()
     moved[-1] = 0                                       # one cell back on its swelling line
@@ -51,10 +56,11 @@ def test_kept_while_only_moduli_vary_in_one_configuration():
                                 (faces_cells, True),
                                 (moved, True),          # a cell changed branch
                                 (moved, True)):
-        keep.decide(snes, states, moduli_only)
+        eq.moduli_vary_only = moduli_only
+        keep.decide(snes, states)
     keep.begin_step()                                   # a new step: its first Jacobian sets it up
-    keep.decide(snes, moved, True)
-    keep.decide(snes, moved, True)
+    keep.decide(snes, moved)
+    keep.decide(snes, moved)
     assert snes.pc.reuse == [False, True, True, False, True, False, True, False, True]
     assert snes.lag == [-2, -1, -1, -2, -1, -2, -1, -2, -1]     # SNES rebuilds once (-2) or keeps (-1)
 
