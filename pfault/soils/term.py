@@ -130,8 +130,8 @@ class SoilTerm(TermDefaults):
         d = eps - history.strain
         moved = np.any(d != 0.0, axis=(1, 2))
         if not np.any(moved):
-            # the state it remembers (a step's start after its commit, the measures and fields of a converged
-            # state): no step of the law (five of a step's eight evaluations at Wuxi's size)
+            # the state it remembers (a step's start after its commit, the measures, fields and columns of a
+            # converged state: four of the five calls of a step): no step of the law
             return history
         new, branch, _ = sl.update(self.soil.law, history.law, d)
         if np.all(moved):
