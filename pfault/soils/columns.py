@@ -20,7 +20,7 @@ import numpy as np
 from mpi4py import MPI
 from scipy.spatial import cKDTree
 
-from .measures import per_cell
+from .measures import column_sums, per_cell
 
 NUDGE = 1e-9            # the shift of a column off mesh vertices and edges, relative to the mesh's extent
 TURN = 0.1              # rad: the shift's turn off the direction to the mesh's centre
@@ -101,8 +101,7 @@ class SoilColumns:
         """(n, 4, q): each soil cell's ``values`` (n, q) recovered at its vertices (the class's docstring)."""
         v = np.asarray(values, float).reshape(len(self.key), -1)
         w = self.term.vol
-        sums = np.zeros((self.n_keys, v.shape[1] + 1))
-        np.add.at(sums, self.key.ravel(), np.repeat(np.column_stack([w[:, None] * v, w]), 4, axis=0))
+        sums = column_sums(self.key.ravel(), np.repeat(np.column_stack([w[:, None] * v, w]), 4, axis=0), self.n_keys)
         self.mpi.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
         at = sums[self.key]                                   # (n, 4, q + 1)
         return at[:, :, :-1] / at[:, :, -1:]
@@ -116,8 +115,7 @@ class SoilColumns:
         """Per point and layer (m, layers, q) the column integral of ``chord_values`` (per chord, (pairs, q)) on
         rank 0 (None elsewhere)."""
         q = chord_values.shape[1]
-        part = np.zeros((self.m * self.n_layers, q))
-        np.add.at(part, self.slot, self.length[:, None] * chord_values)
+        part = column_sums(self.slot, self.length[:, None] * chord_values, self.m * self.n_layers)
         total = np.zeros_like(part) if self.mpi.rank == 0 else None
         self.mpi.Reduce(part, total, op=MPI.SUM, root=0)
         return None if total is None else total.reshape(self.m, self.n_layers, q)

@@ -66,6 +66,15 @@ def check_start(soil: SoilCells, mpi: Any, below: np.ndarray) -> None:
         raise InputError(message)
 
 
+def column_sums(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """(n, q): the rows of ``values`` (k, q) summed by ``index`` (k,), as np.add.at into zeros (the same sums, in
+    the same order), by one np.bincount per column: a tenth of numpy 1.24's ufunc.at time."""
+    out = np.empty((n, values.shape[1]))
+    for j in range(values.shape[1]):
+        out[:, j] = np.bincount(index, weights=values[:, j], minlength=n)
+    return out
+
+
 def per_cell(soil: SoilCells, memory: SoilMemory, load: SoilLoad) -> dict:
     """The reported quantities of each cell of ``soil`` at ``memory``'s state: preconsolidation_stress (Pa),
     preconsolidation_head and head_margin (m), compaction_elastic and compaction_inelastic (vertical strains)."""
@@ -94,13 +103,10 @@ def layer_figures(soil: SoilCells, mpi: Any, memory: SoilMemory, load: SoilLoad,
     strain). Collective."""
     n = len(soil.layers)
     q = per_cell(soil, memory, load)
-    sums = np.zeros((n, 5))
-    np.add.at(sums, soil.layer, np.column_stack([np.ones(len(soil.layer)), memory.branch == sl.VIRGIN, volume,
-                                                volume * q["head_margin"], volume * q["preconsolidation_head"]]))
-    largest = np.full(n, -np.inf)
-    np.maximum.at(largest, soil.layer, q["compaction_inelastic"])
-    smallest = np.full(n, np.inf)
-    np.minimum.at(smallest, soil.layer, q["head_margin"])
+    sums = column_sums(soil.layer, np.column_stack([np.ones(len(soil.layer)), memory.branch == sl.VIRGIN, volume,
+                                                   volume * q["head_margin"], volume * q["preconsolidation_head"]]), n)
+    largest = np.array([q["compaction_inelastic"][soil.layer == k].max(initial=-np.inf) for k in range(n)])
+    smallest = np.array([q["head_margin"][soil.layer == k].min(initial=np.inf) for k in range(n)])
     mpi.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
     mpi.Allreduce(MPI.IN_PLACE, largest, op=MPI.MAX)
     mpi.Allreduce(MPI.IN_PLACE, smallest, op=MPI.MIN)

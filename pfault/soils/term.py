@@ -50,6 +50,10 @@ class SoilTerm(TermDefaults):
     # reloaded below its cap overshoots past it, the soft virgin tangent then sends it far below, and full steps
     # 2-cycle (a clay column reloaded 4 m below its earlier 5 m: |F| 7.8e5, 2.6e6, 7.8e5, ...)
     full_newton_steps = False
+    # within a configuration (each cell's branch) its tangent varies only in the cells' moduli (K = p'/kappa or
+    # p'/lambda, a factor exp(d eps_v / kappa) between iterates): an iterative solver's AMG set up at one Newton
+    # iterate preconditions the next (pfault.solver.policy.PreconditionerReuse)
+    moduli_vary_only = True
 
     def __init__(self, soil: SoilCells, n_cells: int, grad: np.ndarray, vol: np.ndarray, dofs: np.ndarray,
                  free: np.ndarray, to_global: Any, owned: tuple, lame: tuple, overburden: np.ndarray, mpi: Any) -> None:
@@ -124,8 +128,12 @@ class SoilTerm(TermDefaults):
             return history
         eps = self.strain(x_loc)
         d = eps - history.strain
-        new, branch, _ = sl.update(self.soil.law, history.law, d)
         moved = np.any(d != 0.0, axis=(1, 2))
+        if not np.any(moved):
+            # the state it remembers (a step's start after its commit, the measures, fields and columns of a
+            # converged state: four of the five calls of a step): no step of the law
+            return history
+        new, branch, _ = sl.update(self.soil.law, history.law, d)
         if np.all(moved):
             return SoilMemory(history.stress0, new, eps, branch)
         keep = np.where(moved[:, None, None], new.stress, history.law.stress)

@@ -66,6 +66,8 @@ class Equations:
         self.n_jacobians = 0            # Jacobians of the terms assembled (a configuration seen before is kept)
         self._jacobian_key: np.ndarray | None = None    # the terms' configuration of J while it depends on nothing else
         self.jacobian_configuration: np.ndarray | None = None  # the terms' configuration J was last assembled in
+        # J last assembled differs from any other of its configuration in stiffness moduli only (Term.moduli_vary_only)
+        self.moduli_vary_only = True
 
     @property
     def linear(self) -> bool:
@@ -253,7 +255,8 @@ class Equations:
         loads = self.loads.term_loads
         state = config if config is not None else tuple(
             term.configuration(x_loc, load, h) for term, load, h in zip(self.terms, loads, histories))
-        varies = any(term.jacobian_varies(c) for term, c in zip(self.terms, state))
+        varying = [term.jacobian_varies(c) for term, c in zip(self.terms, state)]
+        varies = any(varying)
         flat, key = _flat(state), self._jacobian_key
         same = key is not None and not varies and np.array_equal(key, flat)
         if self.comm.tompi4py().allreduce(same, op=MPI.LAND):
@@ -265,6 +268,7 @@ class Equations:
         J.assemble()
         self.jacobian_configuration = flat
         self._jacobian_key = None if varies else flat
+        self.moduli_vary_only = all(term.moduli_vary_only for term, v in zip(self.terms, varying) if v)
         self.n_jacobians += 1
         self._log_jacobian.end()
         return flat

@@ -11,7 +11,9 @@ dofs. ``TermDefaults`` gives the answers of a term that adds nothing to a part o
 The protocol (methods a term has; collective where it says so):
 
 - ``name``: what it is ("faults", "soils"); ``full_newton_steps``: whether Newton takes full steps on its law (False:
-  it backtracks on |F|, pfault.solver.setup.apply_solver_defaults).
+  it backtracks on |F|, pfault.solver.setup.apply_solver_defaults); ``moduli_vary_only``: whether, where its Jacobian
+  varies within one configuration, only its cells' stiffness moduli change (an iterative solver's preconditioner is
+  then kept: pfault.solver.policy.PreconditionerReuse).
 - Building: ``add_operator(K, blocked)`` adds its constant part to the operator (before assembly);
   ``pattern()`` the global (rows, cols) of its further Jacobian entries.
 - Loads: ``load(t, cell_dp, alpha, out)`` its load at time t (the pore-pressure change per local cell, or None),
@@ -83,6 +85,7 @@ class Term(Protocol):
 
     name: str
     full_newton_steps: bool
+    moduli_vary_only: bool
 
     def add_operator(self, K: Any, blocked: bool) -> None: ...
 
@@ -162,6 +165,11 @@ class TermDefaults:
     part with a margin of its own."""
 
     full_newton_steps = True    # its semismooth Newton takes full steps (pfault.solver.setup.apply_solver_defaults)
+    # where its Jacobian varies within one configuration, only stiffness moduli of its cells change (a soil's
+    # K = p'/kappa), by the factor the iterate's stress moves: an iterative solver's preconditioner set up for one
+    # iterate serves the next of the same configuration (pfault.solver.policy.PreconditionerReuse). False: what
+    # varies carries constraints (a slipping face's friction direction), and the preconditioner is set up anew
+    moduli_vary_only = False
 
     def pattern(self) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
