@@ -193,6 +193,13 @@ class PreconditionerReuse:
         """A step's first Jacobian sets the preconditioner up anew."""
         self.states = None
 
+    def aside(self) -> None:
+        """(FactorReuse's: nothing of this reuse counts the margins' solves)"""
+        return None
+
+    def resume(self, kept: None) -> None:
+        """(FactorReuse's)"""
+
     def decide(self, snes: Any, states: np.ndarray) -> None:
         """A new Jacobian with the terms in ``states`` was assembled (differing from others of its configuration in
         moduli only where the equations' ``moduli_vary_only`` says so): keep the preconditioner or set it up anew
@@ -329,6 +336,67 @@ class ConfigurationMonitor:
                         + (f"  ({changed} {what} changed state)" if its else ""))
 
 
+class ResponseSolve:
+    """The margins' linear solve on a step solver's KSP (``StepSolver.solve_response``), with what the step built."""
+
+    def __init__(self, solver: Any) -> None:
+        self.solver = solver
+
+    def solve(self, rhs: Any, du: Any, config: tuple | None = None) -> tuple[bool, SolveCost]:
+        """Solve J du = rhs from zero with the Jacobian of the converged state in the terms' configuration ``config``
+        (None: the state's; a fault's faces stuck, slipping or open) on the step's KSP. The Krylov solve stops at
+        MARGIN_RTOL (or -ksp_rtol, if larger) of |rhs| (the step's absolute tolerance is for its forces). Its
+        iterations on kept factors do not count toward the next step's factor reuse (``FactorReuse.aside``): the
+        steps solve the same with margins or without. Returns (converged, its cost).
+
+        What the step built is used where it holds (``_operator``): in the configuration of the last
+        Newton Jacobian that Jacobian itself when it depends on the configuration only (no slipping face, no soil
+        cell on its virgin line), else the Jacobian at the state, preconditioned by the last Newton Jacobian's
+        preconditioner; in another configuration (a soil's cells on their cap) a new Jacobian and preconditioner.
+        A direct solver's factors are kept when the factor reuse keeps them (``FactorReuse``)."""
+        s = self.solver
+        eq, t0, nfact, njac, npc = s.eq, time.perf_counter(), factorizations(), s.eq.n_jacobians, pc_setups()
+        ksp = s.snes.getKSP()
+        pc = ksp.getPC()
+        reused = reuse_preconditioner(pc)
+        kept = s.reuse.aside() if s.reuse is not None else None
+        keep = self._operator(config)
+        rtol, atol, divtol, max_it = ksp.getTolerances()
+        try:
+            if keep:
+                pc.setReusePreconditioner(True)
+            ksp.setTolerances(rtol=max(rtol, MARGIN_RTOL), atol=0.0)
+            ksp.solve(rhs, du)
+        finally:
+            ksp.setTolerances(rtol=rtol, atol=atol, divtol=divtol, max_it=max_it)
+            if keep:
+                pc.setReusePreconditioner(reused)
+            if s.reuse is not None:
+                s.reuse.resume(kept)
+        cost = SolveCost(0, int(ksp.getIterationNumber()), time.perf_counter() - t0,
+                         int(factorizations() - nfact), int(eq.n_jacobians - njac), pc_setups=pc_setups() - npc)
+        return ksp.getConvergedReason() > 0, cost
+
+    def _operator(self, config: tuple | None) -> bool:
+        """Put the Jacobian of the converged state in ``config`` into the KSP (assembled only when it differs from
+        the one there, ``Equations.assemble_jacobian``); returns whether the preconditioner built for the last
+        Jacobian is to be kept: that Jacobian was of the same configuration (collective), so it differs from this
+        one by the slipping faces' and compacting cells' values at most, and a Krylov method, not a direct solve
+        alone (preonly), runs to the tolerance on the new operator. A direct solver's factors are the factor
+        reuse's decision (made in ``_jacobian``)."""
+        s = self.solver
+        eq = s.eq
+        before = eq.jacobian_configuration
+        s._jacobian(s.snes, s.state.u, eq.J, eq.J, config or None)
+        ksp = s.snes.getKSP()
+        ksp.setOperators(eq.J, eq.J)
+        after = eq.jacobian_configuration
+        same = before is not None and after is not None and len(before) == len(after) and \
+            bool(np.array_equal(before, after))
+        same = s.comm.tompi4py().allreduce(same, op=MPI.LAND)
+        return same and s.reuse is None and ksp.getType() != PETSc.KSP.Type.PREONLY
+
+
 class StepSolver:
     """Solves the equations for one time after another, advancing ``state``: owns the SNES (created once, code
     defaults where the user is silent, then -snes_*/-ksp_*/-pc_* options), the nonlinear steps' tolerances and
@@ -396,56 +464,8 @@ class StepSolver:
         return int(ksp.getConvergedReason())
 
     def solve_response(self, rhs: Any, du: Any, config: tuple | None = None) -> tuple[bool, SolveCost]:
-        """Solve J du = rhs from zero with the Jacobian of the converged state in the terms' configuration ``config``
-        (None: the state's; a fault's faces stuck, slipping or open) on the step's KSP. The Krylov solve stops at
-        MARGIN_RTOL (or -ksp_rtol, if larger) of |rhs| (the step's absolute tolerance is for its forces). Its
-        iterations on kept factors do not count toward the next step's factor reuse (``FactorReuse.aside``): the
-        steps solve the same with margins or without. Returns (converged, its cost).
-
-        What the step built is used where it holds (``_response_operator``): in the configuration of the last
-        Newton Jacobian that Jacobian itself when it depends on the configuration only (no slipping face, no soil
-        cell on its virgin line), else the Jacobian at the state, preconditioned by the last Newton Jacobian's
-        preconditioner; in another configuration (a soil's cells on their cap) a new Jacobian and preconditioner.
-        A direct solver's factors are kept when the factor reuse keeps them (``FactorReuse``)."""
-        eq, t0, nfact, njac, npc = self.eq, time.perf_counter(), factorizations(), self.eq.n_jacobians, pc_setups()
-        ksp = self.snes.getKSP()
-        pc = ksp.getPC()
-        reused = reuse_preconditioner(pc)
-        kept = self.reuse.aside() if self.reuse is not None else None
-        keep = self._response_operator(config)
-        rtol, atol, divtol, max_it = ksp.getTolerances()
-        try:
-            if keep:
-                pc.setReusePreconditioner(True)
-            ksp.setTolerances(rtol=max(rtol, MARGIN_RTOL), atol=0.0)
-            ksp.solve(rhs, du)
-        finally:
-            ksp.setTolerances(rtol=rtol, atol=atol, divtol=divtol, max_it=max_it)
-            if keep:
-                pc.setReusePreconditioner(reused)
-            if self.reuse is not None:
-                self.reuse.resume(kept)
-        cost = SolveCost(0, int(ksp.getIterationNumber()), time.perf_counter() - t0,
-                         int(factorizations() - nfact), int(eq.n_jacobians - njac), pc_setups=pc_setups() - npc)
-        return ksp.getConvergedReason() > 0, cost
-
-    def _response_operator(self, config: tuple | None) -> bool:
-        """Put the Jacobian of the converged state in ``config`` into the KSP (assembled only when it differs from
-        the one there, ``Equations.assemble_jacobian``); returns whether the preconditioner built for the last
-        Jacobian is to be kept: that Jacobian was of the same configuration (collective), so it differs from this
-        one by the slipping faces' and compacting cells' values at most, and a Krylov method, not a direct solve
-        alone (preonly), runs to the tolerance on the new operator. A direct solver's factors are the factor
-        reuse's decision (made in ``_jacobian``)."""
-        eq = self.eq
-        before = eq.jacobian_configuration
-        self._jacobian(self.snes, self.state.u, eq.J, eq.J, config or None)
-        ksp = self.snes.getKSP()
-        ksp.setOperators(eq.J, eq.J)
-        after = eq.jacobian_configuration
-        same = before is not None and after is not None and len(before) == len(after) and \
-            bool(np.array_equal(before, after))
-        same = self.comm.tompi4py().allreduce(same, op=MPI.LAND)
-        return same and self.reuse is None and ksp.getType() != PETSc.KSP.Type.PREONLY
+        """The margins' linear solve J du = rhs at the converged state (ResponseSolve)."""
+        return ResponseSolve(self).solve(rhs, du, config)
 
     # -- one step ------------------------------------------------------------------------------------
     def solve_step(self, t: float) -> Solve:

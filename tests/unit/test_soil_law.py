@@ -5,10 +5,19 @@ a hypoelastic law with a branch-dependent shear modulus jumps); the elastic and 
 initial state from each form of the preconsolidation."""
 
 import numpy as np
+import pytest
 
 from pfault.physics import soil as sl
 
 RNG = np.random.default_rng(11)
+
+
+@pytest.fixture(autouse=True)
+def seeded():
+    """Every test draws from the same seed, whichever tests ran before it in this process (the suite's workers
+    share the tests out in another order)."""
+    global RNG
+    RNG = np.random.default_rng(11)
 NU = 0.3
 K0 = NU / (1 - NU)
 GAMMA_W = 9806.65
