@@ -5,8 +5,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+# the cores this process may run on (nproc would answer OMP_NUM_THREADS, which env.sh sets to 1)
+workers="${PFAULT_TEST_WORKERS:-$(.venv/bin/python -c 'import os; print(len(os.sched_getaffinity(0)))')}"
 source scripts/env.sh
-workers="${PFAULT_TEST_WORKERS:-$(nproc)}"
 if [ "$workers" -le 1 ]; then
   exec .venv/bin/python -m pytest -q "$@"
 fi
