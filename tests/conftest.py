@@ -142,6 +142,27 @@ def shared_run(tmp_path_factory):
     return get
 
 
+FAULTED_AQUIFER = "config/faulted_aquifer.opts"
+SAND_MODULUS = "-pfault_material_sand_young_modulus 60*MPa\n"
+SAND_INDICES = ("-pfault_material_sand_compression_index 0.05\n-pfault_material_sand_recompression_index 0.01\n"
+                "-pfault_material_sand_void_ratio 0.7\n")
+
+
+def soil_aquifer_slice(directory, size_factor, name):
+    """The faulted aquifer's 40 m slice at ``size_factor`` (benchmarks/faulted_aquifer_mesh.py) and the scene
+    ``name`` in ``directory``: config/faulted_aquifer.opts with its sand normally consolidated (Cc 0.05, Cr 0.01,
+    e0 0.7) in place of its drained modulus; (scene path, mesh path)."""
+    msh = str(directory / "slice.msh")
+    run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--strike-length", "40",
+         "--size-factor", str(size_factor)], timeout=300)
+    with open(os.path.join(REPO, FAULTED_AQUIFER)) as fh:
+        text = fh.read()
+    assert SAND_MODULUS in text
+    scene = directory / name
+    scene.write_text(text.replace(SAND_MODULUS, SAND_INDICES))
+    return str(scene), msh
+
+
 def run_script(script, ranks=1, args=()):
     """Run tests/scripts/<script> and parse the JSON it prints on its last line."""
     proc = run([os.path.join("tests", "scripts", script), *args], ranks=ranks)

@@ -15,12 +15,10 @@ every sand cell beside the fault was indefinite on the virgin line: 72 Newton it
 on 2; at size factor 2 the step failed after 93).
 """
 
-import os
-
 import numpy as np
 import pytest
 
-from conftest import compare_runs, REPO, run, run_scene
+from conftest import compare_runs, run_scene, soil_aquifer_slice
 
 COLUMN = "config/soil_column.opts"
 FAULTED = """# a box with a fault and soils that remember: the equations' two terms
@@ -134,26 +132,12 @@ def test_flow_model_with_soils(tmp_path):
     assert 0 < s["max_subsidence_inelastic_m"] < s["max_subsidence_m"]
 
 
-AQUIFER = "config/faulted_aquifer.opts"
-SAND_MODULUS = "-pfault_material_sand_young_modulus 60*MPa\n"
-SAND_INDICES = ("-pfault_material_sand_compression_index 0.05\n-pfault_material_sand_recompression_index 0.01\n"
-                "-pfault_material_sand_void_ratio 0.7\n")
-
-
 @pytest.fixture(scope="module")
 def aquifer_slice(tmp_path_factory):
     """The faulted aquifer's 40 m slice at size factor 3 (583 tetrahedra, 219 of them sand, 30 fault faces), its
     sand given compression indices, and the options of one 1 m drawdown step."""
-    d = tmp_path_factory.mktemp("aquifer_slice")
-    msh = str(d / "slice.msh")
-    run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--strike-length", "40",
-         "--size-factor", "3"], timeout=300)
-    with open(os.path.join(REPO, AQUIFER)) as fh:
-        text = fh.read()
-    assert SAND_MODULUS in text
-    scene = d / "aquifer_soil.opts"
-    scene.write_text(text.replace(SAND_MODULUS, SAND_INDICES))
-    return str(scene), ["-pfault_mesh_file", msh, "-pfault_material_sand_head_drawdown", "0:0,1*year:1",
+    scene, msh = soil_aquifer_slice(tmp_path_factory.mktemp("aquifer_slice"), 3, "aquifer_soil.opts")
+    return scene, ["-pfault_mesh_file", msh, "-pfault_material_sand_head_drawdown", "0:0,1*year:1",
                         "-pfault_time_end", "1*year", "-pfault_time_steps", "1"]
 
 

@@ -25,7 +25,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import REPO, run, run_scene, WUXI
+from conftest import run, run_scene, soil_aquifer_slice, WUXI
 
 RHO_G = 1000.0 * 9.80665
 SIGMA, H1, COHESION, PHI, NU, DIP = 0.5e6, 57.0, 0.1e6, 20.0, 0.25, 45.0
@@ -310,9 +310,6 @@ def test_wuxi_fissure_face_breaks_past_its_margin(fissure, tmp_path, factor, fai
 
 
 # -- a fault beside soils that remember ---------------------------------------------------------------------------
-SAND_MODULUS = "-pfault_material_sand_young_modulus 60*MPa\n"
-SAND_INDICES = ("-pfault_material_sand_compression_index 0.05\n-pfault_material_sand_recompression_index 0.01\n"
-                "-pfault_material_sand_void_ratio 0.7\n")
 SOIL_YEARS = 1.6        # the first stage: 7.3 m a year drawn down in the sand
 
 
@@ -322,19 +319,12 @@ def soil_aquifer(tmp_path_factory):
     consolidated with Cc 0.05 and Cr 0.01 in place of its drained modulus, run for 1.6 years in one step on 1 and 2
     ranks, where a face is near slipping (after the first year its margin is 4.1 m)."""
     d = tmp_path_factory.mktemp("margin_soil_aquifer")
-    msh = str(d / "slice.msh")
-    run([os.path.join("benchmarks", "faulted_aquifer_mesh.py"), msh, "--strike-length", "40",
-         "--size-factor", "2"], timeout=300)
-    with open(os.path.join(REPO, AQUIFER)) as fh:
-        text = fh.read()
-    assert SAND_MODULUS in text
-    scene = d / "soil_aquifer.opts"
-    scene.write_text(text.replace(SAND_MODULUS, SAND_INDICES))
+    scene, msh = soil_aquifer_slice(d, 2, "soil_aquifer.opts")
     extra = ["-pfault_mesh_file", msh]
     first = ["-pfault_time_end", f"{SOIL_YEARS}*year", "-pfault_time_steps", "1"]
-    runs = {ranks: run_scene(str(scene), d / f"out{ranks}", ranks=ranks, extra=[*extra, *first])[1]
+    runs = {ranks: run_scene(scene, d / f"out{ranks}", ranks=ranks, extra=[*extra, *first])[1]
             for ranks in (1, 2)}
-    return str(scene), d, extra, runs
+    return scene, d, extra, runs
 
 
 def test_soil_aquifer_margins_on_one_and_two_ranks(soil_aquifer):
