@@ -30,6 +30,7 @@ import gc
 import json
 import os
 import selectors
+import shutil
 import signal
 import subprocess
 import sys
@@ -238,6 +239,7 @@ class Workers:
             proc.wait()
 
     def close(self) -> None:
+        """Ends the worker sets (their stdin closed: each returns from serve) and removes the captures' directory."""
         for ranks, proc in list(self.sets.items()):
             with contextlib.suppress(OSError):
                 proc.stdin.close()
@@ -246,6 +248,7 @@ class Workers:
             except subprocess.TimeoutExpired:
                 self._stop(ranks)
         self.sets.clear()
+        shutil.rmtree(self.dir, ignore_errors=True)       # the runs' captured outputs (read and removed already)
 
     def run(self, args: Sequence[object], ranks: int, cwd: str, timeout: float) -> subprocess.CompletedProcess:
         """``python ARGS`` on ``ranks`` workers; the CompletedProcess mpirun would give (the ranks' outputs one

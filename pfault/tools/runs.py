@@ -239,11 +239,6 @@ def pfault_args(run: Run) -> list[str]:
             *option_args(run.overrides)]
 
 
-def pfault_command(run: Run, python: str = sys.executable) -> list[str]:
-    """The command line of a run (pfault_args, under mpirun on more than one rank)."""
-    return command(pfault_args(run), run.ranks, python)
-
-
 def run_pfault(run: Run, cwd: str | None = None, env: Mapping[str, str] | None = None) -> RunResult:
     """Makes one run and waits for it; its output goes to ``<output_dir>.log``. A run past its timeout is
     killed with its ranks, and so is a run whose caller is interrupted (run_many stops the runs of its other

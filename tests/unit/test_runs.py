@@ -59,7 +59,7 @@ def test_commands_on_one_and_more_ranks():
     many = runs.command(["x.py"], 2 * (os.cpu_count() or 1))
     assert many[:3] == ["mpirun", "-n", str(2 * (os.cpu_count() or 1))] and "--oversubscribe" in many
     run = runs.Run("config/oedometer.opts", "out", {"pfault_time_steps": 2}, ranks=2)
-    assert runs.pfault_command(run)[:3] == ["mpirun", "-n", "2"]
+    assert runs.command(runs.pfault_args(run), run.ranks)[:3] == ["mpirun", "-n", "2"]
     assert runs.pfault_args(run)[-2:] == ["-pfault_time_steps", "2"]
 
 
