@@ -90,6 +90,12 @@ def is_direct() -> bool:
     return PETSc.Options().getString("pc_type", "") in ("lu", "cholesky")
 
 
+def mumps_factors_on_ranks() -> bool:
+    """The direct factorisation is MUMPS's on more than one rank."""
+    opts = PETSc.Options()
+    return PETSc.COMM_WORLD.getSize() > 1 and opts.getString("pc_factor_mat_solver_type", "mumps") == "mumps"
+
+
 LINE_SEARCH = "bt"      # Newton's line search where a term's law needs one (SoilTerm.full_newton_steps)
 
 
@@ -131,6 +137,18 @@ def apply_solver_defaults(linear: bool = False, full_steps: bool = True) -> None
             # triangular solves instead of 89 (0.1 s each) for the same 36 Newton iterations
             set_default("ksp_type", "fgmres")
             set_default("ksp_rtol", "1e-8")
+    if not linear and is_direct() and mumps_factors_on_ranks():
+        # MUMPS orders the matrix it gathered from the ranks. Its automatic choice here (PORD) gives the same
+        # matrix another ordering when the ranks' messages arrive in another order: Wuxi on a coarse mesh,
+        # 2 ranks, 12 runs side by side on the 2 cores, three orderings of 777, 790 and 901 Mflop. The factor
+        # reuse decides from the factors' cost (pfault.solver.policy.FactorReuse), so the Newton iterations'
+        # linear solves and the answer followed the machine's load (1.4e-4 of a dataset apart). AMF orders the
+        # same gathered matrix the same way however it arrives (804 Mflop in each of 24 such runs): the runs
+        # of a scene decide and answer alike. Its factors cost more flops than PORD's (Wuxi, 41,742 unknowns,
+        # 8.1 against 6.9 Gflop; calibrated Queretaro, 35,190: 5.4 against 4.2), which the runs' wall time does
+        # not show at the sizes MUMPS is chosen for (pfault.solver.choice; three pairs side by side: Wuxi 8.0-9.3 s
+        # against 8.9-10.0 s with PORD, Queretaro 10.7-11.3 s against 10.4-11.8 s). One rank keeps MUMPS's choice.
+        set_default("mat_mumps_icntl_7", "2")
     set_default("snes_rtol", "1e-10")
     set_default("snes_max_it", "50")
 

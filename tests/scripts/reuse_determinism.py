@@ -1,14 +1,15 @@
 #!/usr/bin/env python
 """A direct fault solve's factor reuse decides the same way however busy the machine is: Wuxi on a coarse mesh
-run twice in-process with MUMPS, the second time with every Krylov iteration slowed down by 30 ms (a machine
-shared with other jobs). Prints one JSON line {"quiet": run, "slowed": run, "max_difference": x}: per run the
-Newton and Krylov iterations and factorisations of each step; the largest difference between the two runs'
-output datasets (fields, fault, surface), relative to the dataset's largest value over the steps.
+run twice in-process with MUMPS, the second time on a machine shared with other jobs (``Busy``). Prints one JSON
+line {"quiet": run, "slowed": run, "max_difference": x}: per run the Newton and Krylov iterations and
+factorisations of each step; the largest difference between the two runs' output datasets (fields, fault,
+surface), relative to the dataset's largest value over the steps.
 
     mpirun -n 2 python tests/scripts/reuse_determinism.py -pfault_output_dir DIR
 """
 import json
 import os
+import subprocess
 import sys
 import time
 
@@ -27,19 +28,39 @@ from petsc4py import PETSc  # noqa: E402
 from pfault.simulation import Simulation  # noqa: E402
 
 
-def slowed(ksp, its, rnorm):
-    """A KSP monitor that takes 30 ms at every Krylov iteration: the solves of a machine busy with other jobs."""
-    if its > 0:
-        time.sleep(0.03)
+class Busy:
+    """A machine busy with other jobs: two processes spinning on the cores (started by rank 0) from the start of
+    the run until the first factorisation, the ordering of the Jacobian gathered from the ranks, is done (the
+    ranks' messages then arrive in another order), and 30 ms at every later Krylov iteration (KSP monitor)."""
+
+    def __init__(self):
+        spin = [sys.executable, "-c", "while True: pass"]
+        self.spinning = [] if MPI.COMM_WORLD.rank else [subprocess.Popen(spin) for _ in range(2)]
+
+    def stop(self):
+        for p in self.spinning:
+            p.kill()
+            p.wait()
+        self.spinning = []
+
+    def monitor(self, ksp, its, rnorm):
+        self.stop()                 # a first residual: the operator's factors are made
+        if its > 0:
+            time.sleep(0.03)
 
 
 def run(outdir, slow):
     PETSc.Options().setValue("pfault_output_dir", outdir)
-    sim = Simulation(SCENE, sys.argv)
-    if slow:
-        sim.solver.snes.getKSP().setMonitor(slowed)       # appended to the factor reuse's own monitor
-    summary = sim.run()
-    sim.destroy()
+    busy = Busy() if slow else None
+    try:
+        sim = Simulation(SCENE, sys.argv)
+        if busy:
+            sim.solver.snes.getKSP().setMonitor(busy.monitor)   # appended to the factor reuse's own monitor
+        summary = sim.run()
+        sim.destroy()
+    finally:
+        if busy:
+            busy.stop()
     steps = [s for s in summary["steps"] if not s.get("initial")]
     return {"converged": bool(summary["converged"]), "newton": [s["newton_its"] for s in steps],
             "factorizations": [s["factorizations"] for s in steps], "krylov": [s["ksp_its"] for s in steps]}
