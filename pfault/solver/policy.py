@@ -90,8 +90,9 @@ class FactorReuse:
     (``factorisation_cost``), not timed, of factors ordered alike in every run (pfault.solver.setup's AMF on more
     than one rank): the decisions, and so the answer, are the same in every run of a scene on the same ranks,
     whatever else the machine is doing. Calibrated Queretaro at paper size, 2 ranks: 16 factorisations instead of 27
-    (-ksp_type preonly) for the same 30 Newton iterations, 159 s instead of 219 s. Factors with null pivots (a singular Jacobian) are never kept;
-    factors of another package than MUMPS are kept only while no face changes state."""
+    (-ksp_type preonly) for the same 30 Newton iterations, 159 s instead of 219 s. Factors with null pivots (a
+    singular Jacobian) are never kept; factors of another package than MUMPS are kept only while no face changes
+    state."""
 
     def __init__(self, comm: Any, ksp: Any) -> None:
         self.mpi = comm.tompi4py()
