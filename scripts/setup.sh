@@ -29,7 +29,7 @@ if [ ! -x .venv/bin/python ]; then
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
 PYPI="gmsh meshio scipy>=1.10,<1.12 pytest pytest-xdist matplotlib flopy h5netcdf netCDF4 pyemu pyproj>=3.6 rasterio>=1.3 xarray"
-# ready when every distribution is installed in its version range (their metadata, read in 0.1 s; importing them all
+# ready when every distribution is installed in its version range (their metadata, read in 0.2 s; importing them all
 # to find out took 2.7-3.4 s of every main job and test run)
 if ! .venv/bin/python - $PYPI >/dev/null 2>&1 <<'EOF'
 import sys
