@@ -17,6 +17,7 @@ from petsc4py import PETSc
 
 from ..physics import geostatic as gs
 from .loads import Loads
+from .operator import build_operator
 from .setup import rigid_body_modes
 
 
@@ -49,7 +50,7 @@ class Equations:
         self.comm.tompi4py().Barrier()  # assembly_wall times the assembly, not the ranks' arrival (as DOLFINx's)
         log_assembly.begin()
         t0 = time.perf_counter()
-        self.K = self._build_operator()
+        self.K = build_operator(self.dm, self.asm, self.dofmap, self.terms)
         self.bc_rows = self._constrained_rows()
         # the lifts of prescribed displacements take K before its constrained rows and columns are zeroed
         self.loads = Loads(self, boundaries, source, settings)
@@ -73,38 +74,6 @@ class Equations:
     def linear(self) -> bool:
         """No term: F is K u - f, and K its Jacobian."""
         return not self.terms
-
-    def _build_operator(self) -> Any:
-        # Filled as BAIJ (every point carries 3k dofs, so the DM's local-to-global map has block size 3): a cell
-        # adds 16 3x3 blocks, each found once, where an AIJ matrix looks up 144 entries one by one. Converted
-        # once to AIJ, which every solver takes (GAMG takes no BAIJ). 1M-tet box, 2 ranks: insertion 0.3 s
-        # instead of 0.7 s, conversion 0.16 s
-        self.dm.setMatType(PETSc.Mat.Type.BAIJ)
-        try:
-            Kb = self.dm.createMatrix()     # (petsc4py 3.18 has no DMGetMatType: pfault's DMs use AIJ)
-        finally:
-            self.dm.setMatType(PETSc.Mat.Type.AIJ)
-        Kb.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        blocked = Kb.getLGMap()[0].getBlockSize() == 3
-        self.asm.add_stiffness(Kb, blocked=blocked)
-        for term in self.terms:
-            term.add_operator(Kb, blocked)      # a fault's condensed face bubbles, its faces' pattern
-        Kb.assemble()
-        lgmap = Kb.getLGMap()
-        K = Kb.convert(PETSc.Mat.Type.AIJ)      # in place; the conversion drops the local-to-global map
-        K.setLGMap(*lgmap)
-        K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        if self.linear:
-            return K
-        # rebuilt with the pattern of the terms' blocks (a fault's bubbles reach beyond the cells' closures: a face's
-        # row reaches the plus cell's fourth vertex, a cell's rows the multipliers of its faces, a face's row those
-        # of the faces sharing a cell) and block size 3 (every point carries 3, 6 or 3k dofs: AMG reads the block
-        # size from the matrix)
-        pairs = [term.pattern() for term in self.terms]
-        rows, cols = _to_owners(K, np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs]))
-        K1 = _extend_pattern(K, rows, cols, bs=3)
-        K.destroy()
-        return K1
 
     # -- constraints ---------------------------------------------------------------------------
     def _constrained_rows(self) -> np.ndarray:
@@ -282,45 +251,3 @@ class Equations:
 def _flat(config: tuple) -> np.ndarray:
     """The terms' configurations as one array."""
     return np.concatenate(config) if config else np.zeros(0, np.int64)
-
-
-def _to_owners(K: Any, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Global (row, col) pairs of any rank's rows -> those of the rows this rank owns, from all ranks."""
-    comm = K.getComm().tompi4py()
-    if comm.size == 1:
-        return rows, cols
-    ranges = np.asarray(K.getOwnershipRanges())
-    owner = np.searchsorted(ranges, rows, side="right") - 1
-    parts = comm.alltoall([(rows[owner == r], cols[owner == r]) for r in range(comm.size)])
-    return (np.concatenate([p[0] for p in parts]).astype(np.int64),
-            np.concatenate([p[1] for p in parts]).astype(np.int64))
-
-
-def _extend_pattern(K0: Any, rows: np.ndarray, cols: np.ndarray, bs: int = 1) -> Any:
-    """A new AIJ matrix (block size bs) with K0's values and pattern plus explicit zeros at (rows, cols) (owned
-    rows)."""
-    rstart, rend = K0.getOwnershipRange()
-    indptr, indices, values = K0.getValuesCSR()
-    nrows = rend - rstart
-    rows = np.asarray(rows, np.int64) - rstart
-    if len(rows) and (rows.min() < 0 or rows.max() >= nrows):
-        raise RuntimeError("extra pattern rows must be owned")
-    ncols = K0.getSize()[1]
-    # K0's rows are sorted and without repeats (an assembled AIJ matrix), so its keys row * ncols + col are
-    # sorted: the new entries are placed by binary search instead of sorting all entries again (paper-size
-    # calibrated Queretaro, with the BAIJ insertion: the operator's build 1.0-1.1 s instead of 1.6-2.3 s)
-    key = np.repeat(np.arange(nrows, dtype=np.int64), np.diff(indptr)) * ncols + indices
-    extra = np.unique(rows * ncols + np.asarray(cols, np.int64))
-    pos = np.searchsorted(key, extra)
-    found = pos < len(key)
-    found[found] = key[pos[found]] == extra[found]
-    extra, pos = extra[~found], pos[~found]
-    c_u = np.insert(indices, pos, (extra % ncols).astype(indices.dtype)).astype(PETSc.IntType)
-    vals = np.insert(values, pos, 0.0)
-    counts = np.diff(indptr) + np.bincount(extra // ncols, minlength=nrows)
-    ptr = np.concatenate([[0], np.cumsum(counts)]).astype(PETSc.IntType)
-    K = PETSc.Mat().createAIJ(size=K0.getSizes(), bsize=bs, csr=(ptr, c_u, vals), comm=K0.getComm())
-    K.setLGMap(*K0.getLGMap())
-    K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-    K.assemble()
-    return K
