@@ -48,14 +48,8 @@ def build_blocked(dm: Any, lgmap: Any, assembler: Any, dofmap: Any, terms: tuple
         term.add_operator(record, True)
         rows, cols = term.pattern()
         record.add(np.asarray(rows, np.int64)[:, None] // 3, np.asarray(cols, np.int64)[:, None] // 3)
-    rows, cols = record.pairs()
     mpi = comm.tompi4py()
-    if mpi.size > 1:
-        starts = np.asarray(mpi.allgather(start // 3) + [N // 3], np.int64)
-        owner = np.searchsorted(starts, rows, side="right") - 1
-        parts = mpi.alltoall([(rows[owner == r], cols[owner == r]) for r in range(mpi.size)])
-        rows = np.concatenate([p[0] for p in parts])
-        cols = np.concatenate([p[1] for p in parts])
+    rows, cols = _to_owners(mpi, np.asarray(mpi.allgather(start // 3) + [N // 3], np.int64), *record.pairs())
     nb, NB = n // 3, N // 3
     key = np.unique((rows - start // 3) * NB + cols)
     ptr = np.concatenate([[0], np.cumsum(np.bincount(key // NB, minlength=nb))]).astype(PETSc.IntType)
@@ -98,7 +92,8 @@ def build_from_dm(dm: Any, assembler: Any, terms: tuple) -> Any:
     # of the faces sharing a cell) and block size 3 (every point carries 3, 6 or 3k dofs: AMG reads the block
     # size from the matrix)
     pairs = [term.pattern() for term in terms]
-    rows, cols = _to_owners(K, np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs]))
+    rows, cols = _to_owners(K.getComm().tompi4py(), np.asarray(K.getOwnershipRanges()),
+                            np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs]))
     K1 = _extend_pattern(K, rows, cols, bs=3)
     K.destroy()
     return K1
@@ -148,12 +143,11 @@ class BlockPattern:
         return np.concatenate(self._rows), np.concatenate(self._cols)
 
 
-def _to_owners(K: Any, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Global (row, col) pairs of any rank's rows -> those of the rows this rank owns, from all ranks."""
-    comm = K.getComm().tompi4py()
+def _to_owners(comm: Any, ranges: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Global (row, col) pairs of any rank's rows -> those of the rows this rank owns, from all ranks (``comm``: an
+    mpi4py communicator; ``ranges``: the first row of every rank and the number of rows)."""
     if comm.size == 1:
         return rows, cols
-    ranges = np.asarray(K.getOwnershipRanges())
     owner = np.searchsorted(ranges, rows, side="right") - 1
     parts = comm.alltoall([(rows[owner == r], cols[owner == r]) for r in range(comm.size)])
     return (np.concatenate([p[0] for p in parts]).astype(np.int64),
