@@ -14,11 +14,10 @@ overriding a file is the normal way to change a scene and says nothing).
 from __future__ import annotations
 
 import os
-import signal
 import sys
 from collections.abc import Sequence
 
-from pfault.errors import EXIT_INPUT, EXIT_USAGE, Interrupted, StopSignal, as_pfault_error
+from pfault.errors import EXIT_INPUT, EXIT_USAGE, Interrupted, as_pfault_error, install_stop_handlers
 from pfault.optionsfile import (COMMAND_LINE, ArgumentError, Entry, _entry_or_include, is_option_name,
                                 petsc_arguments, read_options_file, replace_database)
 
@@ -146,16 +145,11 @@ def start_petsc(program: str, scene: str, args: list[str]) -> bool:
     return True
 
 
-def _stop_signal(signum, frame):
-    raise StopSignal(signal.Signals(signum).name)
-
-
 def run(argv: Sequence[str] | None = None) -> int:
     """main(), with a stop signal before the run's own handling of it one line and exit code 7 instead of a
-    traceback or a death by signal: Ctrl-C (SIGINT) raises KeyboardInterrupt, and SIGTERM and SIGUSR1 raise
-    StopSignal from here on (the time loop installs its own handlers and puts these back after it)."""
-    for sig in (signal.SIGTERM, signal.SIGUSR1):
-        signal.signal(sig, _stop_signal)
+    traceback or a death by signal: SIGTERM, SIGINT (Ctrl-C) and SIGUSR1 raise StopSignal from here on
+    (pfault.errors.stop_signal; the time loop installs its own handlers and puts these back after it)."""
+    install_stop_handlers()
     try:
         return main(argv)
     except KeyboardInterrupt as exc:

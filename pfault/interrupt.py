@@ -21,7 +21,9 @@ from typing import Any, Literal
 
 from mpi4py import MPI
 
-SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR1)
+from .errors import STOP_SIGNALS, raise_swallowed_stop
+
+SIGNALS = STOP_SIGNALS
 
 
 class StopRequest:
@@ -48,6 +50,7 @@ class StopRequest:
         self.received = signum
 
     def __enter__(self) -> StopRequest:
+        raise_swallowed_stop()          # a stop signal at start-up whose exception something swallowed
         for sig in SIGNALS:
             try:
                 self._previous[sig] = signal.signal(sig, self._handler)
