@@ -33,6 +33,14 @@ def _first_rank():
     return True
 
 
+def _singleton_without_daemon():
+    """A run started without an MPI launcher is an MPI singleton; Open MPI's starts a daemon (orted) beside it for
+    the dynamic process management pfault never uses: 0.16 s of a one-rank run's 1.36 s (a small scene, four
+    pairs). Open MPI's isolated singleton starts none; a value the user set stays."""
+    if not any(var in os.environ for var in ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK")):
+        os.environ.setdefault("OMPI_MCA_ess_singleton_isolated", "1")
+
+
 def _say(text):
     if _first_rank():
         sys.stderr.write(text + "\n")
@@ -150,6 +158,7 @@ def run(argv: Sequence[str] | None = None) -> int:
     traceback or a death by signal: SIGTERM, SIGINT (Ctrl-C) and SIGUSR1 raise StopSignal from here on
     (pfault.errors.stop_signal; the time loop installs its own handlers and puts these back after it)."""
     install_stop_handlers()
+    _singleton_without_daemon()
     try:
         return main(argv)
     except KeyboardInterrupt as exc:
