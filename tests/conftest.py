@@ -20,6 +20,7 @@ import sys
 import numpy as np
 import petsc4py
 import pytest
+from xdist.scheduler import LoadFileScheduling
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
@@ -273,6 +274,30 @@ def compare_runs(ref_dir, other_dir, rtol):
     assert [r["step"] for r in sb["steps"]] == [r["step"] for r in sa["steps"]]
     assert sb["completed_steps"] == sa["completed_steps"]
     return worst
+
+
+class HeaviestFileFirst(LoadFileScheduling):
+    """pytest-xdist's file-by-file scheduling (--dist loadfile), the files taken heaviest first by the seconds they
+    took (tests/durations.json, written by scripts/test_durations.py; a file not in it counts as the median file)
+    instead of by their number of tests: heavy files of one or two tests (the calibrations' twins) ran last, one
+    worker on its own for a minute at the end of the suite."""
+
+    def __init__(self, config, log=None):
+        super().__init__(config, log)
+        with open(os.path.join(REPO, "tests", "durations.json")) as fh:
+            self.seconds = json.load(fh)
+        self.median = float(np.median(list(self.seconds.values()))) if self.seconds else 0.0
+
+    def _assign_work_unit(self, node):
+        heaviest = max(self.workqueue, key=lambda scope: self.seconds.get(scope, self.median))
+        self.workqueue.move_to_end(heaviest, last=False)
+        super()._assign_work_unit(node)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    if config.getvalue("dist") == "loadfile":
+        return HeaviestFileFirst(config, log)
+    return None
 
 
 def pytest_configure(config):
