@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 from petsc4py import PETSc
-from scipy import sparse
 
 ADD = PETSc.InsertMode.ADD_VALUES
 
@@ -93,6 +92,7 @@ class CellRows:
         # the sum of the cells' entries into the rows' values as a sparse 0/1 matrix (value slot x cell entry): its
         # product with the cells' blocks adds each slot's entries in the order of the cells, as np.bincount did,
         # at half its cost (a gather in CSR order instead of a scatter)
+        from scipy import sparse           # (imported here: only scenes with soils that remember need it)
         self.gather = sparse.csr_matrix((np.ones(len(take)), (slot[mask], take)), shape=(len(self.cols), 144 * n))
         self.gather.sort_indices()
         self.shared = np.flatnonzero((~mine).any(axis=1))

@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 from mpi4py import MPI
-from scipy.spatial import cKDTree
 
 from .measures import column_sums, per_cell
 
@@ -32,6 +31,7 @@ def segments(points: np.ndarray, corners: np.ndarray, grad: np.ndarray) -> tuple
     none = np.zeros(0, np.int64)
     if not len(points) or not len(corners):
         return none, none, np.zeros(0), np.zeros(0)
+    from scipy.spatial import cKDTree       # (0.3 s to import: only scenes with soils that remember come here)
     lo, hi = corners[:, :, :2].min(axis=1), corners[:, :, :2].max(axis=1)
     found = cKDTree(points).query_ball_point(0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo, axis=1) * (1 + 1e-9))
     count = np.array([len(f) for f in found], dtype=np.int64)

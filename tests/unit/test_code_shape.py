@@ -227,7 +227,8 @@ DEFERRED_IMPORTS: dict[str, str] = {
                   "(-pfault_figures false) never loads it",
     "gmsh": "meshing the built-in geometries and reading .msh files: a box scene does not need it",
     "flopy": "MODFLOW 6 binary heads (-pfault_heads_grid) only",
-    "scipy": "material properties given as fields (field:FILE), NetCDF-3 fields, the calibration's least squares",
+    "scipy": "material properties given as fields (field:FILE), NetCDF-3 fields, the calibration's least squares, "
+             "the vertical columns of soils that remember (scipy.spatial: 0.3 s of every run's start otherwise)",
     "meshio": "the XDMF series of a run directory read back (pfault.post.rundir)",
     "h5netcdf": "the LOS raster and the GIS maps (-pfault_insar_los, -pfault_crs) and InSAR products",
     "pyproj": "a CRS: -pfault_crs, a head file's or an InSAR product's",
