@@ -25,9 +25,12 @@ USAGE = ("usage: mpirun -n N python -m pfault SCENE.opts [-option value ...]   (
          "options and exit codes)")
 
 
+LAUNCHER_RANK = ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK")     # the rank an MPI launcher gives a process
+
+
 def _first_rank():
     """True unless an MPI launcher says this process is not rank 0 (MPI is not started yet)."""
-    for var in ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK"):
+    for var in LAUNCHER_RANK:
         if var in os.environ:
             return os.environ[var] == "0"
     return True
@@ -42,7 +45,7 @@ def _mpi_on_one_node():
     1.36 s). A choice of the user's (OMPI_MCA_pml, --mca pml, a pml in an MCA parameter file) stays, and a job
     across nodes keeps Open MPI's own selection."""
     env = os.environ
-    launched = any(var in env for var in ("OMPI_COMM_WORLD_RANK", "PMIX_RANK", "PMI_RANK"))
+    launched = any(var in env for var in LAUNCHER_RANK)
     if not launched:
         env.setdefault("OMPI_MCA_ess_singleton_isolated", "1")
     one_node = not launched or env.get("OMPI_COMM_WORLD_LOCAL_SIZE", "") == env.get("OMPI_COMM_WORLD_SIZE")

@@ -23,8 +23,6 @@ from mpi4py import MPI
 
 from .errors import STOP_SIGNALS, raise_swallowed_stop
 
-SIGNALS = STOP_SIGNALS
-
 
 class StopRequest:
     """Context manager installing the handlers (main thread only; restored on exit).
@@ -51,7 +49,7 @@ class StopRequest:
 
     def __enter__(self) -> StopRequest:
         raise_swallowed_stop()          # a stop signal at start-up whose exception something swallowed
-        for sig in SIGNALS:
+        for sig in STOP_SIGNALS:
             try:
                 self._previous[sig] = signal.signal(sig, self._handler)
             except ValueError:          # not the main thread: no handlers, no stop requests

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """tests/durations.json from a whole run of the suite: ``./scripts/test.sh --durations=0 | python
 scripts/test_durations.py``. The seconds each test file took (its tests' set-up, call and tear-down), which the
-suite's workers take heaviest first (tests/conftest.py); a file missing from it counts as the mean per test.
+suite's workers take heaviest first (tests/conftest.py); a file missing from it counts as the median file.
 Stale figures only change the order in which the files run."""
 
 import json

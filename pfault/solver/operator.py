@@ -122,17 +122,11 @@ class BlockPattern:
         self._rows.append(r[keep])
         self._cols.append(c[keep])
 
-    def _of_local(self, idx: np.ndarray) -> np.ndarray:
-        idx = np.asarray(idx, np.int64)
-        return np.where(idx >= 0, self.global_of_local[np.maximum(idx, 0)] // 3, -1)
-
     def setValuesBlockedLocalRCV(self, R: Any, C: Any, V: Any, addv: Any = None) -> None:  # noqa: N802 (PETSc's)
-        R, C = np.asarray(R, np.int64), np.asarray(C, np.int64)
-        self.add(np.where(R >= 0, self.block_of_local[np.maximum(R, 0)], -1),
-                 np.where(C >= 0, self.block_of_local[np.maximum(C, 0)], -1))
+        self.add(_mapped(self.block_of_local, R), _mapped(self.block_of_local, C))
 
     def setValuesLocalRCV(self, R: Any, C: Any, V: Any, addv: Any = None) -> None:  # noqa: N802
-        self.add(self._of_local(R), self._of_local(C))
+        self.add(_mapped(self.global_of_local, R) // 3, _mapped(self.global_of_local, C) // 3)
 
     def setValuesRCV(self, R: Any, C: Any, V: Any, addv: Any = None) -> None:  # noqa: N802
         self.add(np.asarray(R, np.int64) // 3, np.asarray(C, np.int64) // 3)
@@ -141,6 +135,12 @@ class BlockPattern:
         if not self._rows:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         return np.concatenate(self._rows), np.concatenate(self._cols)
+
+
+def _mapped(table: np.ndarray, idx: Any) -> np.ndarray:
+    """table[idx], -1 where idx is negative (a left-out entry, as PETSc takes it)."""
+    idx = np.asarray(idx, np.int64)
+    return np.where(idx >= 0, table[np.maximum(idx, 0)], -1)
 
 
 def _to_owners(comm: Any, ranges: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
